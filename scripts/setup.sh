@@ -1,0 +1,47 @@
+#!/usr/bin/env bash
+# Idempotent set-up: Debian packages, project venv (libtorch + usd-core), npm validators.
+# Fast when already done: every step checks before it installs.
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$root"
+log() { printf '[setup] %s\n' "$*" >&2; }
+
+# 1. Debian packages for the independent client checks (Blender imports our files).
+need_apt=()
+command -v blender >/dev/null 2>&1 || need_apt+=(blender)
+python3 -c 'import numpy' >/dev/null 2>&1 || dpkg -s python3-numpy >/dev/null 2>&1 || need_apt+=(python3-numpy)
+command -v node >/dev/null 2>&1 || need_apt+=(nodejs npm)
+command -v cc >/dev/null 2>&1 || need_apt+=(build-essential)
+if [ ${#need_apt[@]} -gt 0 ]; then
+  log "apt-get install ${need_apt[*]}"
+  export DEBIAN_FRONTEND=noninteractive
+  apt-get update -qq
+  apt-get install -y -qq --no-install-recommends "${need_apt[@]}" >/dev/null
+fi
+
+# 2. Python venv: CPU-usable libtorch 2.11 (slim, no CUDA wheels beyond what libtorch_cpu links) + usd-core.
+py="${GARMENTBAKE_PYTHON:-}"
+if [ -z "$py" ]; then
+  for c in "$HOME/.pyenv/versions/3.11.7/bin/python3.11" python3.11 python3; do
+    if command -v "$c" >/dev/null 2>&1; then py="$(command -v "$c")"; break; fi
+  done
+fi
+if [ ! -x .venv/bin/python ]; then
+  log "creating .venv with $py"
+  "$py" -m venv .venv
+fi
+if [ ! -f .venv/lib/python3.11/site-packages/torch/lib/libtorch_cpu.so ] || ! .venv/bin/python -c 'import pxr, numpy' >/dev/null 2>&1; then
+  log "pip install torch==2.11.0 (libtorch), usd-core, numpy"
+  .venv/bin/pip install -q --disable-pip-version-check --no-deps \
+    torch==2.11.0 nvidia-cuda-runtime==13.0.96 nvidia-cuda-cupti==13.0.85
+  .venv/bin/pip install -q --disable-pip-version-check usd-core==26.11 numpy
+fi
+
+# 3. npm tools used by tests: Khronos glTF validator, three.js (GLTFLoader in Node).
+if [ ! -d tools/node/node_modules/gltf-validator ] || [ ! -d tools/node/node_modules/three ]; then
+  log "npm install (tools/node)"
+  (cd tools/node && npm install --silent --no-audit --no-fund >/dev/null)
+fi
+
+# 4. Cargo environment: LIBTORCH / PYO3_PYTHON point at the venv (see .cargo/config.toml).
+log "ready"

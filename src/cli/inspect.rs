@@ -1,0 +1,117 @@
+//! `garmentbake inspect`: what a file holds, as text or JSON.
+
+use crate::geometry::topology::Topology;
+use crate::io::bvh::Bvh;
+use crate::io::obj::read_obj;
+use anyhow::{bail, Context, Result};
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+
+/// Describe a glTF/glb (nodes, skins, joints, meshes, morph targets, animations), a BVH clip
+/// (joints, frames, fps, duration) or an OBJ mesh (vertices, faces, boundary loops).
+#[derive(clap::Args)]
+pub struct Args {
+    /// File to describe (.glb, .gltf, .bvh, .obj).
+    file: PathBuf,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+pub fn run(args: Args) -> Result<i32> {
+    let ext = args.file.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    let report = match ext.as_str() {
+        "glb" | "gltf" => gltf_report(&args.file)?,
+        "bvh" => bvh_report(&args.file)?,
+        "obj" => obj_report(&args.file)?,
+        _ => bail!("{}: unknown file type (expected .glb, .gltf, .bvh or .obj)", args.file.display()),
+    };
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print_text(&report, 0);
+    }
+    Ok(0)
+}
+
+fn gltf_report(path: &Path) -> Result<Value> {
+    let (doc, _, _) = gltf::import(path).with_context(|| format!("{}: not a readable glTF file", path.display()))?;
+    let name = |n: Option<&str>, i: usize| n.map_or_else(|| format!("#{i}"), str::to_string);
+    let meshes: Vec<Value> = doc
+        .meshes()
+        .map(|m| {
+            let prim = m.primitives().next();
+            let vertices = prim.as_ref().and_then(|p| p.get(&gltf::Semantic::Positions)).map_or(0, |a| a.count());
+            let targets = prim.as_ref().map_or(0, |p| p.morph_targets().count());
+            json!({ "name": name(m.name(), m.index()), "primitives": m.primitives().count(), "vertices": vertices, "morph_targets": targets })
+        })
+        .collect();
+    let skins: Vec<Value> = doc
+        .skins()
+        .map(|s| json!({ "name": name(s.name(), s.index()), "joints": s.joints().map(|j| name(j.name(), j.index())).collect::<Vec<_>>() }))
+        .collect();
+    let animations: Vec<Value> = doc
+        .animations()
+        .map(|a| {
+            let duration = a.samplers().filter_map(|s| s.input().max()).filter_map(|v| v.as_array()?.first()?.as_f64()).fold(0.0, f64::max);
+            let frames = a.samplers().map(|s| s.input().count()).max().unwrap_or(0);
+            json!({ "name": name(a.name(), a.index()), "channels": a.channels().count(), "keyframes": frames, "duration_s": duration })
+        })
+        .collect();
+    Ok(json!({ "file": path.display().to_string(), "nodes": doc.nodes().count(), "meshes": meshes, "skins": skins, "animations": animations }))
+}
+
+fn bvh_report(path: &Path) -> Result<Value> {
+    let bvh = Bvh::read(path)?;
+    Ok(json!({
+        "file": path.display().to_string(),
+        "joints": bvh.joints.iter().map(|j| j.name.clone()).collect::<Vec<_>>(),
+        "frames": bvh.frame_count(), "fps": bvh.fps(), "duration_s": bvh.duration(),
+    }))
+}
+
+fn obj_report(path: &Path) -> Result<Value> {
+    let obj = read_obj(path)?;
+    let topo = Topology::new(&obj.mesh);
+    let loops = topo.boundary_loops();
+    let (lo, hi) = obj.mesh.bounds();
+    Ok(json!({
+        "file": path.display().to_string(), "vertices": obj.mesh.vertex_count(), "faces": obj.mesh.triangle_count(),
+        "edges": topo.edges.len(), "boundary_loops": loops.iter().map(Vec::len).collect::<Vec<_>>(),
+        "non_manifold_edges": topo.non_manifold_edges.len(), "has_uvs": obj.mesh.uv.is_some(), "bounds_min": lo, "bounds_max": hi,
+    }))
+}
+
+/// Indented `key: value` lines; short arrays stay on one line.
+fn print_text(v: &Value, indent: usize) {
+    let pad = " ".repeat(indent);
+    match v {
+        Value::Object(map) => {
+            for (k, v) in map {
+                match v {
+                    Value::Object(_) => {
+                        println!("{pad}{k}:");
+                        print_text(v, indent + 2);
+                    }
+                    Value::Array(items) if items.iter().any(Value::is_object) => {
+                        println!("{pad}{k}: {}", items.len());
+                        for item in items {
+                            print_text(item, indent + 2);
+                            println!();
+                        }
+                    }
+                    _ => println!("{pad}{k}: {}", compact(v)),
+                }
+            }
+        }
+        other => println!("{pad}{}", compact(other)),
+    }
+}
+
+fn compact(v: &Value) -> String {
+    match v {
+        Value::String(s) => s.clone(),
+        Value::Array(a) => a.iter().map(compact).collect::<Vec<_>>().join(", "),
+        other => other.to_string(),
+    }
+}

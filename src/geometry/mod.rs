@@ -1,0 +1,36 @@
+//! Triangle-mesh geometry shared by the importers, the models and the exporters.
+//!
+//! Storage is plain `f32` arrays (`[f32; 3]` positions, `[u32; 3]` triangles) so buffers go to
+//! tch tensors and glTF accessors without conversion; `nalgebra` is used for the arithmetic.
+//! Functions that take a mesh assume it passed [`TriMesh::validate`] (the readers guarantee that):
+//! bad *input* is rejected at the file boundary with an error, not deep inside the maths.
+
+pub mod laplacian;
+pub mod mesh;
+pub mod nearest;
+pub mod normals;
+pub mod topology;
+
+#[cfg(test)]
+pub(crate) mod test_meshes;
+
+pub use laplacian::Laplacian;
+pub use mesh::{FaceVaryingUv, MeshError, TriMesh};
+pub use nearest::{NearestError, PointIndex};
+pub use normals::{face_normals, vertex_normals};
+pub use topology::{Hinge, Topology};
+
+/// The vector type used for geometric arithmetic.
+pub type Vec3 = nalgebra::Vector3<f32>;
+
+/// Converts a stored position into a vector for arithmetic.
+#[inline]
+pub fn v3(p: [f32; 3]) -> Vec3 {
+    Vec3::new(p[0], p[1], p[2])
+}
+
+/// Converts a vector back into stored form.
+#[inline]
+pub fn arr3(v: Vec3) -> [f32; 3] {
+    [v.x, v.y, v.z]
+}

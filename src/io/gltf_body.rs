@@ -1,0 +1,143 @@
+//! Reads a skinned body from glTF: the first skinned mesh node, its skin's joints as a Skeleton,
+//! JOINTS/WEIGHTS as a Skin. All triangle primitives of that mesh are merged.
+
+use crate::geometry::mesh::{FaceVaryingUv, TriMesh};
+use crate::rig::skeleton::topological_order;
+use crate::rig::{JointTransform, Skeleton, Skin};
+use nalgebra::{Matrix4, Quaternion, UnitQuaternion, Vector3};
+use std::path::Path;
+
+/// A rigged body: welded-or-not triangle mesh, per-vertex normals and a skin on a skeleton.
+#[derive(Clone, Debug)]
+pub struct Body {
+    pub name: String,
+    pub mesh: TriMesh,
+    pub normals: Vec<[f32; 3]>,
+    pub skeleton: Skeleton,
+    pub skin: Skin,
+}
+
+#[derive(Debug, thiserror::Error)]
+#[error("{path}: {reason}")]
+pub struct BodyError {
+    pub path: String,
+    pub reason: String,
+}
+
+pub fn read_body(path: &Path) -> Result<Body, BodyError> {
+    let fail = |reason: String| BodyError { path: path.display().to_string(), reason };
+    let (doc, buffers, _) = gltf::import(path).map_err(|e| fail(format!("not a readable glTF file ({e})")))?;
+    let node = doc
+        .nodes()
+        .find(|n| n.mesh().is_some() && n.skin().is_some())
+        .ok_or_else(|| fail(format!("no skinned mesh ({} meshes, {} skins); export the body with its armature", doc.meshes().len(), doc.skins().len())))?;
+    let (mesh, skin) = (node.mesh().expect("checked"), node.skin().expect("checked"));
+    let (skeleton, remap) = read_skeleton(&doc, &skin, &buffers).map_err(&fail)?;
+    let (tri, normals, skin) = read_mesh(&mesh, &buffers, &remap).map_err(&fail)?;
+    let name = node.name().or(mesh.name()).unwrap_or("body").to_string();
+    Ok(Body { name, mesh: tri, normals, skeleton, skin })
+}
+
+/// Skeleton from the skin's joints, sorted parents-first; `remap[old skin slot] = new joint index`.
+fn read_skeleton(doc: &gltf::Document, skin: &gltf::Skin, buffers: &[gltf::buffer::Data]) -> Result<(Skeleton, Vec<usize>), String> {
+    let joints: Vec<gltf::Node> = skin.joints().collect();
+    let mut node_parent = vec![None; doc.nodes().len()];
+    for n in doc.nodes() {
+        for c in n.children() {
+            node_parent[c.index()] = Some(n.index());
+        }
+    }
+    let slot_of = |node: usize| joints.iter().position(|j| j.index() == node);
+    let parents: Vec<Option<usize>> = joints
+        .iter()
+        .map(|j| {
+            let mut p = node_parent[j.index()];
+            while let Some(n) = p {
+                if let Some(s) = slot_of(n) {
+                    return Some(s);
+                }
+                p = node_parent[n];
+            }
+            None
+        })
+        .collect();
+    let ibm: Vec<Matrix4<f32>> = match skin.reader(|b| Some(&buffers[b.index()])).read_inverse_bind_matrices() {
+        Some(it) => it.map(|m| Matrix4::from_fn(|r, c| m[c][r])).collect(),
+        None => vec![Matrix4::identity(); joints.len()],
+    };
+    let order = topological_order(&parents).ok_or("the skin's joint hierarchy has a cycle")?;
+    let mut remap = vec![0; joints.len()];
+    for (new, &old) in order.iter().enumerate() {
+        remap[old] = new;
+    }
+    let rest = order.iter().map(|&o| node_rest(&joints[o])).collect();
+    let skeleton = Skeleton::new(
+        order.iter().map(|&o| joints[o].name().map_or_else(|| format!("joint{o}"), str::to_string)).collect(),
+        order.iter().map(|&o| parents[o].map(|p| remap[p])).collect(),
+        rest,
+        order.iter().map(|&o| ibm[o]).collect(),
+    )
+    .map_err(|e| e.to_string())?;
+    Ok((skeleton, remap))
+}
+
+fn node_rest(node: &gltf::Node) -> JointTransform {
+    let (t, r, s) = node.transform().decomposed();
+    JointTransform {
+        translation: Vector3::from(t),
+        rotation: UnitQuaternion::from_quaternion(Quaternion::new(r[3], r[0], r[1], r[2])),
+        scale: Vector3::from(s),
+    }
+}
+
+type MeshParts = (TriMesh, Vec<[f32; 3]>, Skin);
+
+fn read_mesh(mesh: &gltf::Mesh, buffers: &[gltf::buffer::Data], remap: &[usize]) -> Result<MeshParts, String> {
+    let mut positions = Vec::new();
+    let mut normals = Vec::new();
+    let mut uvs = Vec::new();
+    let mut triangles = Vec::new();
+    let mut influences: Vec<Vec<(u16, f32)>> = Vec::new();
+    for prim in mesh.primitives().filter(|p| p.mode() == gltf::mesh::Mode::Triangles) {
+        let reader = prim.reader(|b| Some(&buffers[b.index()]));
+        let base = positions.len() as u32;
+        let pos: Vec<[f32; 3]> = reader.read_positions().ok_or("a primitive has no POSITION")?.collect();
+        let n = pos.len();
+        positions.extend(pos);
+        let nrm: Option<Vec<[f32; 3]>> = reader.read_normals().map(|it| it.collect());
+        normals.extend(nrm.unwrap_or_else(|| vec![[0.0; 3]; n]));
+        let uv: Option<Vec<[f32; 2]>> = reader.read_tex_coords(0).map(|t| t.into_f32().collect());
+        uvs.extend(uv.unwrap_or_else(|| vec![[0.0; 2]; n]));
+        match reader.read_indices() {
+            Some(idx) => {
+                let idx: Vec<u32> = idx.into_u32().collect();
+                triangles.extend(idx.chunks_exact(3).map(|t| [t[0] + base, t[1] + base, t[2] + base]));
+            }
+            None => triangles.extend((0..n as u32 / 3).map(|t| [base + 3 * t, base + 3 * t + 1, base + 3 * t + 2])),
+        }
+        let mut vertex_influences = vec![Vec::new(); n];
+        for set in 0..2 {
+            let (Some(j), Some(w)) = (reader.read_joints(set), reader.read_weights(set)) else { break };
+            for (v, (j, w)) in j.into_u16().zip(w.into_f32()).enumerate() {
+                for k in 0..4 {
+                    let slot = j[k] as usize;
+                    if w[k] > 0.0 {
+                        let joint = *remap.get(slot).ok_or(format!("JOINTS_{set} refers to joint {slot}, the skin has {}", remap.len()))?;
+                        vertex_influences[v].push((joint as u16, w[k]));
+                    }
+                }
+            }
+        }
+        influences.extend(vertex_influences);
+    }
+    if triangles.is_empty() {
+        return Err("the skinned mesh has no triangles".into());
+    }
+    let most = influences.iter().map(Vec::len).max().unwrap_or(0);
+    if most == 0 {
+        return Err("the skinned mesh has no JOINTS_0/WEIGHTS_0".into());
+    }
+    let skin = Skin::from_sparse(&influences, if most > 4 { 8 } else { 4 }, 0);
+    let uv = Some(FaceVaryingUv { coords: uvs, triangles: triangles.clone() });
+    Ok((TriMesh { positions, triangles, uv }, normals, skin))
+}

@@ -1,0 +1,7 @@
+//! Importers: OBJ garments, BVH motion capture, joint-name maps, skinned glTF bodies, MakeHuman.
+
+pub mod bvh;
+pub mod gltf_body;
+pub mod joint_map;
+pub mod makehuman;
+pub mod obj;

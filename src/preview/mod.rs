@@ -1,0 +1,142 @@
+//! Software rasteriser for PNG previews of posed bodies and draped garments.
+//!
+//! Self-contained on purpose: plain slices in, `image::RgbImage` / PNG out, so the
+//! CLI can show a contact sheet of frames without a GPU or a font crate.
+//!
+//! Conventions: metres, Y-up, right-handed, characters face +Z. Projection is
+//! orthographic; every view looks horizontally, so world `y` is always image-up.
+//! * [`View::Front`]: camera on +Z looking to -Z (world +X is image right, so the
+//!   character's left hand appears on the image's right, as when facing a person).
+//! * [`View::Side`]: camera on +X looking to -X (the character faces image left).
+//! * [`View::Back`]: camera on -Z looking to +Z.
+//! * [`View::ThreeQuarter`]: camera on (+X, +Z) at 45°, looking at the character's
+//!   front-left.
+
+mod font;
+mod framing;
+mod raster;
+mod sheet;
+#[cfg(test)]
+mod tests;
+
+use std::fs;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+pub use font::{draw_text, has_glyph};
+pub use framing::{Framing, FramingMode, View};
+pub use sheet::{contact_sheet, render_panel, render_panel_with};
+
+/// Suggested colour for the body, so garments read against it.
+pub const BODY_GREY: [u8; 3] = [175, 175, 178];
+/// Suggested garment colours (cycled when several garments are drawn).
+pub const GARMENT_COLORS: [[u8; 3]; 4] = [
+    [70, 120, 210],
+    [210, 90, 70],
+    [80, 170, 100],
+    [200, 160, 60],
+];
+
+/// One triangle mesh to draw in a single flat colour (shaded by the renderer).
+#[derive(Clone, Copy, Debug)]
+pub struct DrawMesh<'a> {
+    pub positions: &'a [[f32; 3]],
+    pub triangles: &'a [[u32; 3]],
+    pub color: [u8; 3],
+}
+
+/// One cell of a contact sheet: meshes drawn together from one view, with a label.
+#[derive(Clone, Debug)]
+pub struct Panel<'a> {
+    pub meshes: Vec<DrawMesh<'a>>,
+    pub view: View,
+    pub label: String,
+}
+
+/// Layout and style of a contact sheet (also used by [`render_panel_with`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SheetOptions {
+    pub panel_width: u32,
+    pub panel_height: u32,
+    /// Panels per row; rows are filled in order (row-major). 0 is treated as 1.
+    pub columns: u32,
+    pub background: [u8; 3],
+    /// Shared (default): one framing per view over all panels, so frames are comparable.
+    pub framing: FramingMode,
+    /// Render at this factor and box-downsample (1 = off, clamped to 1..=4).
+    pub supersample: u32,
+    /// Height of the floor line in metres (`None` draws no line).
+    pub floor_y: Option<f32>,
+}
+
+impl Default for SheetOptions {
+    fn default() -> Self {
+        SheetOptions {
+            panel_width: 320,
+            panel_height: 480,
+            columns: 4,
+            background: [238, 238, 238],
+            framing: FramingMode::Shared,
+            supersample: 2,
+            floor_y: Some(0.0),
+        }
+    }
+}
+
+/// Failure to write a preview image; always names the destination path.
+#[derive(Debug, thiserror::Error)]
+pub enum PreviewError {
+    #[error("cannot write preview PNG {}: {source}", .path.display())]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("cannot encode preview PNG {}: {source}", .path.display())]
+    Encode {
+        path: PathBuf,
+        source: image::ImageError,
+    },
+}
+
+/// Write `img` as PNG to `path` atomically: encode to a sibling temp file, then
+/// rename, so a reader never sees a half-written preview.
+pub fn save_png(img: &image::RgbImage, path: &Path) -> Result<(), PreviewError> {
+    let tmp = temp_sibling(path);
+    let result = write_png(img, &tmp, path).and_then(|()| {
+        fs::rename(&tmp, path).map_err(|source| PreviewError::Io {
+            path: path.to_path_buf(),
+            source,
+        })
+    });
+    if result.is_err() {
+        // Best effort: the temp file may not even exist.
+        let _ = fs::remove_file(&tmp);
+    }
+    result
+}
+
+fn temp_sibling(path: &Path) -> PathBuf {
+    let mut name = path
+        .file_name()
+        .map(|n| n.to_os_string())
+        .unwrap_or_else(|| "preview.png".into());
+    name.push(format!(".tmp{}", std::process::id()));
+    path.with_file_name(name)
+}
+
+/// Encode into `tmp`; errors are reported against the final `path` the caller asked for.
+fn write_png(img: &image::RgbImage, tmp: &Path, path: &Path) -> Result<(), PreviewError> {
+    let io_err = |source| PreviewError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let file = fs::File::create(tmp).map_err(io_err)?;
+    let mut out = BufWriter::new(file);
+    img.write_to(&mut out, image::ImageFormat::Png)
+        .map_err(|source| PreviewError::Encode {
+            path: path.to_path_buf(),
+            source,
+        })?;
+    out.flush().map_err(io_err)?;
+    Ok(())
+}

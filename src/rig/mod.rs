@@ -1,0 +1,17 @@
+//! The rig: Skeleton (joints, parents, rest, inverse binds), forward kinematics, linear blend
+//! skinning, SkelAnimation clips, and retargeting of motion capture onto the body.
+
+pub mod animation;
+pub mod retarget;
+pub mod skeleton;
+pub mod skin;
+
+pub use animation::SkelAnimation;
+pub use skeleton::{JointTransform, Skeleton};
+pub use skin::Skin;
+
+#[derive(Debug, thiserror::Error)]
+pub enum RigError {
+    #[error("{0}")]
+    Invalid(String),
+}
