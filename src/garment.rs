@@ -40,22 +40,38 @@ impl Garment {
         let obj = read_obj(path)?;
         let side = sidecar_path(path);
         let sidecar = if side.exists() {
-            let text = std::fs::read_to_string(&side).with_context(|| format!("cannot read {}", side.display()))?;
-            toml::from_str(&text).with_context(|| format!("{}: invalid garment sidecar", side.display()))?
+            let text = std::fs::read_to_string(&side)
+                .with_context(|| format!("cannot read {}", side.display()))?;
+            toml::from_str(&text)
+                .with_context(|| format!("{}: invalid garment sidecar", side.display()))?
         } else {
             GarmentSidecar::default()
         };
         let n = obj.mesh.vertex_count();
         if let Some(bad) = sidecar.pinned.iter().find(|&&v| v as usize >= n) {
-            bail!("{}: pinned vertex {bad} out of range ({} has {n} vertices)", side.display(), path.display());
+            bail!(
+                "{}: pinned vertex {bad} out of range ({} has {n} vertices)",
+                side.display(),
+                path.display()
+            );
         }
-        let name = path.file_stem().map_or("garment".into(), |s| s.to_string_lossy().into_owned());
-        Ok(Garment { name, mesh: obj.mesh, sidecar })
+        let name = path
+            .file_stem()
+            .map_or("garment".into(), |s| s.to_string_lossy().into_owned());
+        Ok(Garment {
+            name,
+            mesh: obj.mesh,
+            sidecar,
+        })
     }
 
     /// Writes the OBJ and its sidecar (both atomically).
     pub fn write(&self, path: &Path) -> Result<()> {
-        write_obj(path, &self.mesh, &format!("garmentbake garment '{}'", self.name))?;
+        write_obj(
+            path,
+            &self.mesh,
+            &format!("garmentbake garment '{}'", self.name),
+        )?;
         let text = toml::to_string(&self.sidecar)?;
         exporters::atomic::write_atomic(&sidecar_path(path), text.as_bytes())?;
         Ok(())
@@ -63,7 +79,12 @@ impl Garment {
 }
 
 /// Signed distance of each point along the normal of its nearest body vertex (negative: inside).
-pub fn body_offsets(points: &[[f32; 3]], body_points: &[[f32; 3]], body_normals: &[[f32; 3]], index: &PointIndex) -> Vec<f32> {
+pub fn body_offsets(
+    points: &[[f32; 3]],
+    body_points: &[[f32; 3]],
+    body_normals: &[[f32; 3]],
+    index: &PointIndex,
+) -> Vec<f32> {
     points
         .iter()
         .map(|p| {
@@ -74,20 +95,41 @@ pub fn body_offsets(points: &[[f32; 3]], body_points: &[[f32; 3]], body_normals:
 }
 
 /// Vertices of `points` inside the body (offset < 0).
-pub fn count_inside(points: &[[f32; 3]], body_points: &[[f32; 3]], body_normals: &[[f32; 3]]) -> Result<usize> {
+pub fn count_inside(
+    points: &[[f32; 3]],
+    body_points: &[[f32; 3]],
+    body_normals: &[[f32; 3]],
+) -> Result<usize> {
     let index = PointIndex::new(body_points)?;
-    Ok(body_offsets(points, body_points, body_normals, &index).iter().filter(|&&d| d < 0.0).count())
+    Ok(body_offsets(points, body_points, body_normals, &index)
+        .iter()
+        .filter(|&&d| d < 0.0)
+        .count())
 }
 
 /// Push-out fitting: moves vertices closer than `margin` to the body (or inside it) out along the
 /// body normal, relaxing the result with a little Laplacian smoothing so no spikes remain; a final
 /// push guarantees the margin. Returns how many vertices were inside before.
-pub fn push_out(mesh: &mut TriMesh, body_points: &[[f32; 3]], body_normals: &[[f32; 3]], margin: f32) -> Result<usize> {
+pub fn push_out(
+    mesh: &mut TriMesh,
+    body_points: &[[f32; 3]],
+    body_normals: &[[f32; 3]],
+    margin: f32,
+) -> Result<usize> {
     let index = PointIndex::new(body_points)?;
-    let inside = body_offsets(&mesh.positions, body_points, body_normals, &index).iter().filter(|&&d| d < 0.0).count();
+    let inside = body_offsets(&mesh.positions, body_points, body_normals, &index)
+        .iter()
+        .filter(|&&d| d < 0.0)
+        .count();
     let laplacian = Laplacian::uniform(mesh);
     for round in 0..6 {
-        push_once(&mut mesh.positions, body_points, body_normals, &index, margin);
+        push_once(
+            &mut mesh.positions,
+            body_points,
+            body_normals,
+            &index,
+            margin,
+        );
         if round < 5 {
             mesh.positions = laplacian.smooth(&mesh.positions, 0.3, 1);
         }
@@ -95,7 +137,13 @@ pub fn push_out(mesh: &mut TriMesh, body_points: &[[f32; 3]], body_normals: &[[f
     Ok(inside)
 }
 
-fn push_once(points: &mut [[f32; 3]], body_points: &[[f32; 3]], body_normals: &[[f32; 3]], index: &PointIndex, margin: f32) {
+fn push_once(
+    points: &mut [[f32; 3]],
+    body_points: &[[f32; 3]],
+    body_normals: &[[f32; 3]],
+    index: &PointIndex,
+    margin: f32,
+) {
     let offsets = body_offsets(points, body_points, body_normals, index);
     for (p, d) in points.iter_mut().zip(offsets) {
         if d < margin {

@@ -9,25 +9,44 @@ use std::path::Path;
 
 /// Reads `--map` files (each applies to the clips whose joint names it covers).
 pub fn read_maps(paths: &[impl AsRef<Path>]) -> Result<Vec<JointMap>> {
-    Ok(paths.iter().map(|p| JointMap::read(p.as_ref())).collect::<Result<_, _>>()?)
+    Ok(paths
+        .iter()
+        .map(|p| JointMap::read(p.as_ref()))
+        .collect::<Result<_, _>>()?)
 }
 
 /// A clip retargeted onto `skeleton`, optionally resampled to `fps` (an integer divisor of the
 /// source rate: frames are kept, never interpolated).
-pub fn load_clip(path: &Path, maps: &[JointMap], skeleton: &Skeleton, fps: Option<f32>) -> Result<Retargeted> {
+pub fn load_clip(
+    path: &Path,
+    maps: &[JointMap],
+    skeleton: &Skeleton,
+    fps: Option<f32>,
+) -> Result<Retargeted> {
     let bvh = Bvh::read(path)?;
     if bvh.frame_count() < 2 {
-        bail!("{}: needs at least 2 frames, has {}", path.display(), bvh.frame_count());
+        bail!(
+            "{}: needs at least 2 frames, has {}",
+            path.display(),
+            bvh.frame_count()
+        );
     }
     let names: Vec<&str> = bvh.joints.iter().map(|j| j.name.as_str()).collect();
     let rig: Vec<&str> = skeleton.joint_names.iter().map(String::as_str).collect();
-    let name = path.file_stem().map_or("clip".into(), |s| s.to_string_lossy().into_owned());
+    let name = path
+        .file_stem()
+        .map_or("clip".into(), |s| s.to_string_lossy().into_owned());
     let resolved = joint_map::resolve(&path.display().to_string(), &names, &rig, maps)?;
     let mut clip = retarget(&bvh, &resolved, skeleton, &name);
     if let Some(fps) = fps {
         let step = clip.animation.fps / fps;
         if fps <= 0.0 || (step - step.round()).abs() > 1e-3 || step < 1.0 {
-            bail!("{}: --fps {fps} must divide the clip rate {} (e.g. {})", path.display(), clip.animation.fps, clip.animation.fps / 4.0);
+            bail!(
+                "{}: --fps {fps} must divide the clip rate {} (e.g. {})",
+                path.display(),
+                clip.animation.fps,
+                clip.animation.fps / 4.0
+            );
         }
         clip.animation = clip.animation.subsampled(0, step.round() as usize);
     }

@@ -20,14 +20,23 @@ pub enum GltfError {
 
 /// Writes `asset` to `path`; `.glb` → binary container, anything else → `.gltf` + `.bin`.
 pub fn write(asset: &BakedAsset, path: &Path) -> Result<(), GltfError> {
-    check(asset).map_err(|reason| GltfError::Invalid { path: path.display().to_string(), reason })?;
-    let binary = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("glb"));
+    check(asset).map_err(|reason| GltfError::Invalid {
+        path: path.display().to_string(),
+        reason,
+    })?;
+    let binary = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("glb"));
     if binary {
         let (root, bin) = build(asset, None);
         write_atomic(path, &glb_bytes(&root, &bin))?;
     } else {
         let bin_path = path.with_extension("bin");
-        let bin_name = bin_path.file_name().unwrap_or_default().to_string_lossy().into_owned();
+        let bin_name = bin_path
+            .file_name()
+            .unwrap_or_default()
+            .to_string_lossy()
+            .into_owned();
         let (root, bin) = build(asset, Some(bin_name));
         write_atomic(&bin_path, &bin)?;
         let text = json::serialize::to_string_pretty(&root).expect("glTF JSON serialises");
@@ -48,26 +57,48 @@ fn check(asset: &BakedAsset) -> Result<(), String> {
     for mesh in &asset.meshes {
         let n = mesh.points.len();
         if let Some(skin) = &mesh.skin {
-            if skin.joint_indices.len() != n * skin.influences || skin.joint_weights.len() != n * skin.influences {
-                return Err(format!("mesh '{}': skin arrays do not match {n} vertices", mesh.name));
+            if skin.joint_indices.len() != n * skin.influences
+                || skin.joint_weights.len() != n * skin.influences
+            {
+                return Err(format!(
+                    "mesh '{}': skin arrays do not match {n} vertices",
+                    mesh.name
+                ));
             }
             if let Some(j) = skin.joint_indices.iter().find(|&&j| j as usize >= joints) {
-                return Err(format!("mesh '{}': joint index {j} but the skeleton has {joints} joints", mesh.name));
+                return Err(format!(
+                    "mesh '{}': joint index {j} but the skeleton has {joints} joints",
+                    mesh.name
+                ));
             }
         }
         if let Some(t) = mesh.triangles.iter().flatten().find(|&&i| i as usize >= n) {
-            return Err(format!("mesh '{}': triangle index {t} out of range ({n} vertices)", mesh.name));
+            return Err(format!(
+                "mesh '{}': triangle index {t} out of range ({n} vertices)",
+                mesh.name
+            ));
         }
         if mesh.blend_shapes.iter().any(|b| b.offsets.len() != n) {
-            return Err(format!("mesh '{}': a blend shape does not have {n} offsets", mesh.name));
+            return Err(format!(
+                "mesh '{}': a blend shape does not have {n} offsets",
+                mesh.name
+            ));
         }
     }
     for anim in &asset.animations {
-        if anim.rotations.len() != anim.frame_count * joints || anim.translations.len() != anim.frame_count * joints {
-            return Err(format!("animation '{}': joint samples do not match {} frames", anim.name, anim.frame_count));
+        if anim.rotations.len() != anim.frame_count * joints
+            || anim.translations.len() != anim.frame_count * joints
+        {
+            return Err(format!(
+                "animation '{}': joint samples do not match {} frames",
+                anim.name, anim.frame_count
+            ));
         }
         if anim.frame_count < 2 || anim.fps <= 0.0 {
-            return Err(format!("animation '{}': needs at least 2 frames and a positive rate", anim.name));
+            return Err(format!(
+                "animation '{}': needs at least 2 frames and a positive rate",
+                anim.name
+            ));
         }
     }
     Ok(())
@@ -112,11 +143,28 @@ impl Builder {
 
     /// Float accessor over `comps`-wide elements, with min/max when asked (required for POSITION,
     /// morph POSITION deltas and animation inputs).
-    fn floats(&mut self, data: &[f32], comps: usize, target: Target, bounds: bool) -> json::Index<json::Accessor> {
+    fn floats(
+        &mut self,
+        data: &[f32],
+        comps: usize,
+        target: Target,
+        bounds: bool,
+    ) -> json::Index<json::Accessor> {
         let bytes: Vec<u8> = data.iter().flat_map(|v| v.to_le_bytes()).collect();
         let view = self.view(&bytes, target);
-        let (min, max) = if bounds { min_max(data, comps) } else { (None, None) };
-        self.accessor(view, data.len() / comps, json::accessor::ComponentType::F32, type_of(comps), min, max)
+        let (min, max) = if bounds {
+            min_max(data, comps)
+        } else {
+            (None, None)
+        };
+        self.accessor(
+            view,
+            data.len() / comps,
+            json::accessor::ComponentType::F32,
+            type_of(comps),
+            min,
+            max,
+        )
     }
 
     fn accessor(
@@ -176,11 +224,17 @@ fn extras(value: serde_json::Value) -> json::Extras {
 }
 
 fn build(asset: &BakedAsset, bin_uri: Option<String>) -> (json::Root, Vec<u8>) {
-    let mut b = Builder { root: json::Root::default(), bin: Vec::new() };
+    let mut b = Builder {
+        root: json::Root::default(),
+        bin: Vec::new(),
+    };
     b.root.asset.generator = Some(format!("garmentbake {}", env!("CARGO_PKG_VERSION")));
     if !asset.provenance.is_empty() {
-        let map: serde_json::Map<_, _> =
-            asset.provenance.iter().map(|(k, v)| (k.clone(), serde_json::Value::from(v.clone()))).collect();
+        let map: serde_json::Map<_, _> = asset
+            .provenance
+            .iter()
+            .map(|(k, v)| (k.clone(), serde_json::Value::from(v.clone())))
+            .collect();
         b.root.asset.extras = extras(serde_json::Value::Object(map));
     }
     let joint_nodes = add_joints(&mut b, asset);
@@ -206,12 +260,23 @@ fn build(asset: &BakedAsset, bin_uri: Option<String>) -> (json::Root, Vec<u8>) {
         .map(|(n, _)| *n)
         .chain(mesh_nodes.iter().copied())
         .collect();
-    let scene = b.root.push(json::Scene { nodes: roots, name: Some("garmentbake".into()), extensions: None, extras: None });
+    let scene = b.root.push(json::Scene {
+        nodes: roots,
+        name: Some("garmentbake".into()),
+        extensions: None,
+        extras: None,
+    });
     b.root.scene = Some(scene);
     while b.bin.len() % 4 != 0 {
         b.bin.push(0);
     }
-    b.root.push(json::Buffer { byte_length: USize64::from(b.bin.len()), name: None, uri: bin_uri, extensions: None, extras: None });
+    b.root.push(json::Buffer {
+        byte_length: USize64::from(b.bin.len()),
+        name: None,
+        uri: bin_uri,
+        extensions: None,
+        extras: None,
+    });
     (b.root, b.bin)
 }
 
@@ -230,17 +295,34 @@ fn add_joints(b: &mut Builder, asset: &BakedAsset) -> Vec<json::Index<json::Node
         .collect();
     for (j, parent) in sk.parents.iter().enumerate() {
         if let Some(p) = parent {
-            let children = b.root.nodes[nodes[*p].value()].children.get_or_insert_with(Vec::new);
+            let children = b.root.nodes[nodes[*p].value()]
+                .children
+                .get_or_insert_with(Vec::new);
             children.push(nodes[j]);
         }
     }
     nodes
 }
 
-fn add_skin(b: &mut Builder, asset: &BakedAsset, joints: &[json::Index<json::Node>]) -> json::Index<json::Skin> {
-    let ibm: Vec<f32> = asset.skeleton.inverse_bind_matrices.iter().flatten().copied().collect();
+fn add_skin(
+    b: &mut Builder,
+    asset: &BakedAsset,
+    joints: &[json::Index<json::Node>],
+) -> json::Index<json::Skin> {
+    let ibm: Vec<f32> = asset
+        .skeleton
+        .inverse_bind_matrices
+        .iter()
+        .flatten()
+        .copied()
+        .collect();
     let acc = b.floats(&ibm, 16, Target::None, false);
-    let root = asset.skeleton.parents.iter().position(|p| p.is_none()).map(|r| joints[r]);
+    let root = asset
+        .skeleton
+        .parents
+        .iter()
+        .position(|p| p.is_none())
+        .map(|r| joints[r]);
     b.root.push(json::Skin {
         extensions: None,
         extras: None,
@@ -257,18 +339,34 @@ fn add_mesh(b: &mut Builder, mesh: &Mesh) -> json::Index<json::Mesh> {
     let pos = b.floats(&flat(&mesh.points), 3, Target::Vertex, true);
     attributes.insert(Valid(Semantic::Positions), pos);
     if let Some(normals) = &mesh.normals {
-        attributes.insert(Valid(Semantic::Normals), b.floats(&flat(normals), 3, Target::Vertex, false));
+        attributes.insert(
+            Valid(Semantic::Normals),
+            b.floats(&flat(normals), 3, Target::Vertex, false),
+        );
     }
     if let Some(uvs) = &mesh.uvs {
-        attributes.insert(Valid(Semantic::TexCoords(0)), b.floats(&flat(uvs), 2, Target::Vertex, false));
+        attributes.insert(
+            Valid(Semantic::TexCoords(0)),
+            b.floats(&flat(uvs), 2, Target::Vertex, false),
+        );
     }
     if let Some(skin) = &mesh.skin {
         for (set, (joints, weights)) in skin_sets(skin).into_iter().enumerate() {
             let view = b.view(&joints, Target::Vertex);
-            let count = joints.len() / 4;
-            let acc = b.accessor(view, count, json::accessor::ComponentType::U16, json::accessor::Type::Vec4, None, None);
+            let count = joints.len() / 8; // four u16 per vertex
+            let acc = b.accessor(
+                view,
+                count,
+                json::accessor::ComponentType::U16,
+                json::accessor::Type::Vec4,
+                None,
+                None,
+            );
             attributes.insert(Valid(Semantic::Joints(set as u32)), acc);
-            attributes.insert(Valid(Semantic::Weights(set as u32)), b.floats(&weights, 4, Target::Vertex, false));
+            attributes.insert(
+                Valid(Semantic::Weights(set as u32)),
+                b.floats(&weights, 4, Target::Vertex, false),
+            );
         }
     }
     let indices = add_indices(b, &mesh.triangles, mesh.points.len());
@@ -277,7 +375,10 @@ fn add_mesh(b: &mut Builder, mesh: &Mesh) -> json::Index<json::Mesh> {
             .iter()
             .map(|shape| json::mesh::MorphTarget {
                 positions: Some(b.floats(&flat(&shape.offsets), 3, Target::Vertex, true)),
-                normals: shape.normal_offsets.as_ref().map(|n| b.floats(&flat(n), 3, Target::Vertex, false)),
+                normals: shape
+                    .normal_offsets
+                    .as_ref()
+                    .map(|n| b.floats(&flat(n), 3, Target::Vertex, false)),
                 tangents: None,
             })
             .collect()
@@ -286,7 +387,9 @@ fn add_mesh(b: &mut Builder, mesh: &Mesh) -> json::Index<json::Mesh> {
     let names: Vec<_> = mesh.blend_shapes.iter().map(|s| s.name.clone()).collect();
     b.root.push(json::Mesh {
         extensions: None,
-        extras: (!names.is_empty()).then(|| extras(serde_json::json!({ "targetNames": names }))).flatten(),
+        extras: (!names.is_empty())
+            .then(|| extras(serde_json::json!({ "targetNames": names })))
+            .flatten(),
         name: Some(mesh.name.clone()),
         primitives: vec![json::mesh::Primitive {
             attributes,
@@ -325,16 +428,42 @@ fn skin_sets(skin: &crate::asset::SkinBinding) -> Vec<(Vec<u8>, Vec<f32>)> {
     out
 }
 
-fn add_indices(b: &mut Builder, triangles: &[[u32; 3]], vertex_count: usize) -> json::Index<json::Accessor> {
+fn add_indices(
+    b: &mut Builder,
+    triangles: &[[u32; 3]],
+    vertex_count: usize,
+) -> json::Index<json::Accessor> {
     let count = triangles.len() * 3;
     if vertex_count <= u16::MAX as usize {
-        let bytes: Vec<u8> = triangles.iter().flatten().flat_map(|&i| (i as u16).to_le_bytes()).collect();
+        let bytes: Vec<u8> = triangles
+            .iter()
+            .flatten()
+            .flat_map(|&i| (i as u16).to_le_bytes())
+            .collect();
         let view = b.view(&bytes, Target::Index);
-        b.accessor(view, count, json::accessor::ComponentType::U16, json::accessor::Type::Scalar, None, None)
+        b.accessor(
+            view,
+            count,
+            json::accessor::ComponentType::U16,
+            json::accessor::Type::Scalar,
+            None,
+            None,
+        )
     } else {
-        let bytes: Vec<u8> = triangles.iter().flatten().flat_map(|&i| i.to_le_bytes()).collect();
+        let bytes: Vec<u8> = triangles
+            .iter()
+            .flatten()
+            .flat_map(|&i| i.to_le_bytes())
+            .collect();
         let view = b.view(&bytes, Target::Index);
-        b.accessor(view, count, json::accessor::ComponentType::U32, json::accessor::Type::Scalar, None, None)
+        b.accessor(
+            view,
+            count,
+            json::accessor::ComponentType::U32,
+            json::accessor::Type::Scalar,
+            None,
+            None,
+        )
     }
 }
 
@@ -346,7 +475,8 @@ fn add_material(b: &mut Builder, mesh: &Mesh) -> json::Index<json::Material> {
         double_sided: true,
         ..Default::default()
     };
-    material.pbr_metallic_roughness.base_color_factor = json::material::PbrBaseColorFactor([r, g, bl, 1.0]);
+    material.pbr_metallic_roughness.base_color_factor =
+        json::material::PbrBaseColorFactor([r, g, bl, 1.0]);
     material.pbr_metallic_roughness.metallic_factor = json::material::StrengthFactor(0.0);
     material.pbr_metallic_roughness.roughness_factor = json::material::StrengthFactor(0.9);
     b.root.push(material)
@@ -366,34 +496,59 @@ fn add_animation(
     let mut channels = Vec::new();
     let mut push = |b: &mut Builder, node, path, data: Vec<f32>, comps| {
         let output = b.floats(&data, comps, Target::None, false);
-        let sampler = json::Index::push(&mut samplers, Sampler {
-            extensions: None,
-            extras: None,
-            input,
-            interpolation: Valid(Interpolation::Linear),
-            output,
-        });
+        let sampler = json::Index::push(
+            &mut samplers,
+            Sampler {
+                extensions: None,
+                extras: None,
+                input,
+                interpolation: Valid(Interpolation::Linear),
+                output,
+            },
+        );
         channels.push(Channel {
             sampler,
-            target: ATarget { extensions: None, extras: None, node, path: Valid(path) },
+            target: ATarget {
+                extensions: None,
+                extras: None,
+                node,
+                path: Valid(path),
+            },
             extensions: None,
             extras: None,
         });
     };
     for (j, &node) in joint_nodes.iter().enumerate() {
         let track = |f: usize| f * joints + j;
-        let moves = (1..anim.frame_count).any(|f| anim.translations[track(f)] != anim.translations[j]);
+        let moves =
+            (1..anim.frame_count).any(|f| anim.translations[track(f)] != anim.translations[j]);
         if moves {
-            let data = (0..anim.frame_count).flat_map(|f| anim.translations[track(f)]).collect();
+            let data = (0..anim.frame_count)
+                .flat_map(|f| anim.translations[track(f)])
+                .collect();
             push(b, node, Property::Translation, data, 3);
         }
-        let data = (0..anim.frame_count).flat_map(|f| unit_quat(anim.rotations[track(f)])).collect();
+        let data = (0..anim.frame_count)
+            .flat_map(|f| unit_quat(anim.rotations[track(f)]))
+            .collect();
         push(b, node, Property::Rotation, data, 4);
     }
     for (mesh, weights) in &anim.blend_shape_weights {
-        push(b, mesh_nodes[*mesh], Property::MorphTargetWeights, weights.clone(), 1);
+        push(
+            b,
+            mesh_nodes[*mesh],
+            Property::MorphTargetWeights,
+            weights.clone(),
+            1,
+        );
     }
-    b.root.push(json::Animation { extensions: None, extras: None, channels, name: Some(anim.name.clone()), samplers });
+    b.root.push(json::Animation {
+        extensions: None,
+        extras: None,
+        channels,
+        name: Some(anim.name.clone()),
+        samplers,
+    });
 }
 
 /// Renormalised in f32 so validators see unit quaternions.

@@ -33,11 +33,19 @@ pub fn venv_dir() -> Option<PathBuf> {
 /// Makes the venv's site-packages importable in the embedded interpreter (which starts from the
 /// base installation's prefix, not the venv's).
 fn add_venv(py: Python<'_>) -> PyResult<()> {
-    let Some(venv) = venv_dir() else { return Ok(()) };
+    let Some(venv) = venv_dir() else {
+        return Ok(());
+    };
     let site = py.import("site")?;
     let sys = py.import("sys")?;
-    let version: (u8, u8) = sys.getattr("version_info")?.extract::<(u8, u8, u8, String, u8)>().map(|v| (v.0, v.1))?;
-    let dir = venv.join(format!("lib/python{}.{}/site-packages", version.0, version.1));
+    let version: (u8, u8) = sys
+        .getattr("version_info")?
+        .extract::<(u8, u8, u8, String, u8)>()
+        .map(|v| (v.0, v.1))?;
+    let dir = venv.join(format!(
+        "lib/python{}.{}/site-packages",
+        version.0, version.1
+    ));
     site.call_method1("addsitedir", (dir.to_string_lossy().into_owned(),))?;
     Ok(())
 }
@@ -45,7 +53,8 @@ fn add_venv(py: Python<'_>) -> PyResult<()> {
 /// Imports `pxr.<module>` with the venv on the path; a missing usd-core gets an actionable error.
 pub fn import_pxr<'py>(py: Python<'py>, module: &str) -> Result<Bound<'py, PyModule>, BridgeError> {
     add_venv(py)?;
-    py.import(format!("pxr.{module}").as_str()).map_err(|e| BridgeError::MissingPxr(e.to_string()))
+    py.import(format!("pxr.{module}").as_str())
+        .map_err(|e| BridgeError::MissingPxr(e.to_string()))
 }
 
 /// The usd-core version, e.g. "0.26.11": proves the bridge works end to end.

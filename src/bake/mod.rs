@@ -10,8 +10,16 @@ pub fn skeleton_asset(skeleton: &Skeleton) -> asset::Skeleton {
         joint_names: skeleton.joint_names.clone(),
         parents: skeleton.parents.clone(),
         rest_translations: skeleton.rest.iter().map(|r| r.translation.into()).collect(),
-        rest_rotations: skeleton.rest.iter().map(|r| r.rotation.coords.into()).collect(),
-        inverse_bind_matrices: skeleton.inverse_bind.iter().map(|m| m.as_slice().try_into().expect("4x4")).collect(),
+        rest_rotations: skeleton
+            .rest
+            .iter()
+            .map(|r| r.rotation.coords.into())
+            .collect(),
+        inverse_bind_matrices: skeleton
+            .inverse_bind
+            .iter()
+            .map(|m| m.as_slice().try_into().expect("4x4"))
+            .collect(),
     }
 }
 
@@ -20,8 +28,18 @@ pub fn animation_asset(anim: &SkelAnimation) -> asset::SkelAnimation {
         name: anim.name.clone(),
         fps: anim.fps,
         frame_count: anim.frame_count(),
-        translations: anim.translations.iter().flatten().map(|t| (*t).into()).collect(),
-        rotations: anim.rotations.iter().flatten().map(|r| r.coords.into()).collect(),
+        translations: anim
+            .translations
+            .iter()
+            .flatten()
+            .map(|t| (*t).into())
+            .collect(),
+        rotations: anim
+            .rotations
+            .iter()
+            .flatten()
+            .map(|r| r.coords.into())
+            .collect(),
         blend_shape_weights: Vec::new(),
     }
 }
@@ -29,28 +47,56 @@ pub fn animation_asset(anim: &SkelAnimation) -> asset::SkelAnimation {
 /// A skinned mesh, split at UV seams (glTF needs one UV per vertex); normals from the welded mesh
 /// so seams stay invisible.
 /// `normals`: per-vertex normals to keep (e.g. read from a file), else computed.
-pub fn skinned_mesh_asset(name: &str, mesh: &TriMesh, normals: Option<&[[f32; 3]]>, skin: &Skin, color: [f32; 3]) -> asset::Mesh {
-    let normals = normals.map_or_else(|| vertex_normals(&mesh.positions, &mesh.triangles), <[_]>::to_vec);
+pub fn skinned_mesh_asset(
+    name: &str,
+    mesh: &TriMesh,
+    normals: Option<&[[f32; 3]]>,
+    skin: &Skin,
+    color: [f32; 3],
+) -> asset::Mesh {
+    let normals = normals.map_or_else(
+        || vertex_normals(&mesh.positions, &mesh.triangles),
+        <[_]>::to_vec,
+    );
     let (source_vertex, uvs, triangles) = match &mesh.uv {
         // Already one UV per vertex: keep the vertex order untouched.
-        Some(uv) if uv.triangles == mesh.triangles && uv.coords.len() == mesh.vertex_count() => {
-            ((0..mesh.vertex_count() as u32).collect(), Some(uv.coords.clone()), mesh.triangles.clone())
-        }
+        Some(uv) if uv.triangles == mesh.triangles && uv.coords.len() == mesh.vertex_count() => (
+            (0..mesh.vertex_count() as u32).collect(),
+            Some(uv.coords.clone()),
+            mesh.triangles.clone(),
+        ),
         Some(_) => {
             let (remap, uvs, tris) = mesh.split_by_uv();
             (remap, Some(uvs), tris)
         }
-        None => ((0..mesh.vertex_count() as u32).collect(), None, mesh.triangles.clone()),
+        None => (
+            (0..mesh.vertex_count() as u32).collect(),
+            None,
+            mesh.triangles.clone(),
+        ),
     };
-    let pick = |v: &[[f32; 3]]| source_vertex.iter().map(|&s| v[s as usize]).collect::<Vec<_>>();
+    let pick = |v: &[[f32; 3]]| {
+        source_vertex
+            .iter()
+            .map(|&s| v[s as usize])
+            .collect::<Vec<_>>()
+    };
     let influences = skin.influences;
     let joint_indices = source_vertex
         .iter()
-        .flat_map(|&s| skin.joint_indices[s as usize * influences..(s as usize + 1) * influences].iter().copied())
+        .flat_map(|&s| {
+            skin.joint_indices[s as usize * influences..(s as usize + 1) * influences]
+                .iter()
+                .copied()
+        })
         .collect();
     let joint_weights = source_vertex
         .iter()
-        .flat_map(|&s| skin.joint_weights[s as usize * influences..(s as usize + 1) * influences].iter().copied())
+        .flat_map(|&s| {
+            skin.joint_weights[s as usize * influences..(s as usize + 1) * influences]
+                .iter()
+                .copied()
+        })
         .collect();
     asset::Mesh {
         name: name.to_string(),
@@ -58,7 +104,11 @@ pub fn skinned_mesh_asset(name: &str, mesh: &TriMesh, normals: Option<&[[f32; 3]
         normals: Some(pick(&normals)),
         uvs,
         triangles,
-        skin: Some(asset::SkinBinding { influences, joint_indices, joint_weights }),
+        skin: Some(asset::SkinBinding {
+            influences,
+            joint_indices,
+            joint_weights,
+        }),
         blend_shapes: Vec::new(),
         source_vertex,
         color,

@@ -19,12 +19,19 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Result<i32> {
-    let ext = args.file.extension().map(|e| e.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    let ext = args
+        .file
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
     let report = match ext.as_str() {
         "glb" | "gltf" => gltf_report(&args.file)?,
         "bvh" => bvh_report(&args.file)?,
         "obj" => obj_report(&args.file)?,
-        _ => bail!("{}: unknown file type (expected .glb, .gltf, .bvh or .obj)", args.file.display()),
+        _ => bail!(
+            "{}: unknown file type (expected .glb, .gltf, .bvh or .obj)",
+            args.file.display()
+        ),
     };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
@@ -35,7 +42,8 @@ pub fn run(args: Args) -> Result<i32> {
 }
 
 fn gltf_report(path: &Path) -> Result<Value> {
-    let (doc, _, _) = gltf::import(path).with_context(|| format!("{}: not a readable glTF file", path.display()))?;
+    let (doc, _, _) = gltf::import(path)
+        .with_context(|| format!("{}: not a readable glTF file", path.display()))?;
     let name = |n: Option<&str>, i: usize| n.map_or_else(|| format!("#{i}"), str::to_string);
     let meshes: Vec<Value> = doc
         .meshes()
@@ -58,7 +66,9 @@ fn gltf_report(path: &Path) -> Result<Value> {
             json!({ "name": name(a.name(), a.index()), "channels": a.channels().count(), "keyframes": frames, "duration_s": duration })
         })
         .collect();
-    Ok(json!({ "file": path.display().to_string(), "nodes": doc.nodes().count(), "meshes": meshes, "skins": skins, "animations": animations }))
+    Ok(
+        json!({ "file": path.display().to_string(), "nodes": doc.nodes().count(), "meshes": meshes, "skins": skins, "animations": animations }),
+    )
 }
 
 fn bvh_report(path: &Path) -> Result<Value> {

@@ -38,10 +38,18 @@ pub fn run(args: Args) -> Result<i32> {
     let maps = read_maps(&args.maps)?;
     let mut asset = exporters::BakedAsset {
         skeleton: skeleton_asset(&body.skeleton),
-        meshes: vec![skinned_mesh_asset(&body.name, &body.mesh, Some(&body.normals), &body.skin, BODY_COLOR)],
+        meshes: vec![skinned_mesh_asset(
+            &body.name,
+            &body.mesh,
+            Some(&body.normals),
+            &body.skin,
+            BODY_COLOR,
+        )],
         ..Default::default()
     };
-    asset.provenance.push(("body".into(), args.body.display().to_string()));
+    asset
+        .provenance
+        .push(("body".into(), args.body.display().to_string()));
     let mut report = Vec::new();
     for path in &args.motions {
         let clip = load_clip(path, &maps, &body.skeleton, args.fps)?;
@@ -57,11 +65,17 @@ pub fn run(args: Args) -> Result<i32> {
             "map": clip.map_name, "scale": clip.scale, "floor_offset_m": clip.floor_offset,
         }));
         asset.animations.push(animation_asset(a));
-        asset.provenance.push((format!("clip:{}", a.name), path.display().to_string()));
+        asset
+            .provenance
+            .push((format!("clip:{}", a.name), path.display().to_string()));
     }
-    exporters::gltf::write(&asset, &args.out).with_context(|| format!("writing {}", args.out.display()))?;
+    exporters::gltf::write(&asset, &args.out)
+        .with_context(|| format!("writing {}", args.out.display()))?;
     if args.json {
-        println!("{}", serde_json::json!({ "out": args.out.display().to_string(), "clips": report }));
+        println!(
+            "{}",
+            serde_json::json!({ "out": args.out.display().to_string(), "clips": report })
+        );
     } else {
         println!("wrote {}", args.out.display());
     }

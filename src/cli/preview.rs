@@ -3,7 +3,10 @@
 use crate::io::gltf_body::{read_body, Body};
 use crate::io::obj::read_obj;
 use crate::motion::{load_clip, read_maps};
-use crate::preview::{contact_sheet, save_png, DrawMesh, FramingMode, Panel, SheetOptions, View, BODY_GREY, GARMENT_COLORS};
+use crate::preview::{
+    contact_sheet, save_png, DrawMesh, FramingMode, Panel, SheetOptions, View, BODY_GREY,
+    GARMENT_COLORS,
+};
 use crate::rig::SkelAnimation;
 use anyhow::{bail, Result};
 use std::path::PathBuf;
@@ -56,7 +59,11 @@ enum ViewArg {
 impl std::fmt::Display for ViewArg {
     fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
         use clap::ValueEnum;
-        f.write_str(self.to_possible_value().expect("no skipped values").get_name())
+        f.write_str(
+            self.to_possible_value()
+                .expect("no skipped values")
+                .get_name(),
+        )
     }
 }
 
@@ -80,20 +87,44 @@ pub fn run(args: Args) -> Result<i32> {
             }
             let clip = load_clip(path, &read_maps(&args.maps)?, &body.skeleton, None)?;
             let frames = pick_frames(clip.animation.frame_count(), args.frames, &args.frame_list)?;
-            frames.iter().map(|&f| (frame_label(&clip.animation, f), posed(&body, &clip.animation, f))).collect()
+            frames
+                .iter()
+                .map(|&f| {
+                    (
+                        frame_label(&clip.animation, f),
+                        posed(&body, &clip.animation, f),
+                    )
+                })
+                .collect()
         }
         None => vec![("rest".to_string(), body.mesh.positions.clone())],
     };
-    let garments = args.garments.iter().map(|p| read_obj(p)).collect::<Result<Vec<_>, _>>()?;
+    let garments = args
+        .garments
+        .iter()
+        .map(|p| read_obj(p))
+        .collect::<Result<Vec<_>, _>>()?;
     let mut panels = Vec::new();
     for (label, points) in &shots {
         for view in &args.views {
-            let mut meshes = vec![DrawMesh { positions: points, triangles: &body.mesh.triangles, color: BODY_GREY }];
+            let mut meshes = vec![DrawMesh {
+                positions: points,
+                triangles: &body.mesh.triangles,
+                color: BODY_GREY,
+            }];
             for (i, g) in garments.iter().enumerate() {
                 let color = GARMENT_COLORS[i % GARMENT_COLORS.len()];
-                meshes.push(DrawMesh { positions: &g.mesh.positions, triangles: &g.mesh.triangles, color });
+                meshes.push(DrawMesh {
+                    positions: &g.mesh.positions,
+                    triangles: &g.mesh.triangles,
+                    color,
+                });
             }
-            panels.push(Panel { meshes, view: (*view).into(), label: format!("{label} {view}") });
+            panels.push(Panel {
+                meshes,
+                view: (*view).into(),
+                label: format!("{label} {view}"),
+            });
         }
     }
     let opts = SheetOptions {
@@ -122,7 +153,15 @@ pub(crate) fn pick_frames(total: usize, count: usize, list: &[usize]) -> Result<
         return Ok(list.to_vec());
     }
     let count = count.clamp(1, total);
-    Ok((0..count).map(|i| if count == 1 { 0 } else { i * (total - 1) / (count - 1) }).collect())
+    Ok((0..count)
+        .map(|i| {
+            if count == 1 {
+                0
+            } else {
+                i * (total - 1) / (count - 1)
+            }
+        })
+        .collect())
 }
 
 fn posed(body: &Body, anim: &SkelAnimation, frame: usize) -> Vec<[f32; 3]> {

@@ -25,21 +25,41 @@ pub struct BodyError {
 }
 
 pub fn read_body(path: &Path) -> Result<Body, BodyError> {
-    let fail = |reason: String| BodyError { path: path.display().to_string(), reason };
-    let (doc, buffers, _) = gltf::import(path).map_err(|e| fail(format!("not a readable glTF file ({e})")))?;
+    let fail = |reason: String| BodyError {
+        path: path.display().to_string(),
+        reason,
+    };
+    let (doc, buffers, _) =
+        gltf::import(path).map_err(|e| fail(format!("not a readable glTF file ({e})")))?;
     let node = doc
         .nodes()
         .find(|n| n.mesh().is_some() && n.skin().is_some())
-        .ok_or_else(|| fail(format!("no skinned mesh ({} meshes, {} skins); export the body with its armature", doc.meshes().len(), doc.skins().len())))?;
+        .ok_or_else(|| {
+            fail(format!(
+                "no skinned mesh ({} meshes, {} skins); export the body with its armature",
+                doc.meshes().len(),
+                doc.skins().len()
+            ))
+        })?;
     let (mesh, skin) = (node.mesh().expect("checked"), node.skin().expect("checked"));
     let (skeleton, remap) = read_skeleton(&doc, &skin, &buffers).map_err(&fail)?;
     let (tri, normals, skin) = read_mesh(&mesh, &buffers, &remap).map_err(&fail)?;
     let name = node.name().or(mesh.name()).unwrap_or("body").to_string();
-    Ok(Body { name, mesh: tri, normals, skeleton, skin })
+    Ok(Body {
+        name,
+        mesh: tri,
+        normals,
+        skeleton,
+        skin,
+    })
 }
 
 /// Skeleton from the skin's joints, sorted parents-first; `remap[old skin slot] = new joint index`.
-fn read_skeleton(doc: &gltf::Document, skin: &gltf::Skin, buffers: &[gltf::buffer::Data]) -> Result<(Skeleton, Vec<usize>), String> {
+fn read_skeleton(
+    doc: &gltf::Document,
+    skin: &gltf::Skin,
+    buffers: &[gltf::buffer::Data],
+) -> Result<(Skeleton, Vec<usize>), String> {
     let joints: Vec<gltf::Node> = skin.joints().collect();
     let mut node_parent = vec![None; doc.nodes().len()];
     for n in doc.nodes() {
@@ -61,7 +81,10 @@ fn read_skeleton(doc: &gltf::Document, skin: &gltf::Skin, buffers: &[gltf::buffe
             None
         })
         .collect();
-    let ibm: Vec<Matrix4<f32>> = match skin.reader(|b| Some(&buffers[b.index()])).read_inverse_bind_matrices() {
+    let ibm: Vec<Matrix4<f32>> = match skin
+        .reader(|b| Some(&buffers[b.index()]))
+        .read_inverse_bind_matrices()
+    {
         Some(it) => it.map(|m| Matrix4::from_fn(|r, c| m[c][r])).collect(),
         None => vec![Matrix4::identity(); joints.len()],
     };
@@ -72,8 +95,18 @@ fn read_skeleton(doc: &gltf::Document, skin: &gltf::Skin, buffers: &[gltf::buffe
     }
     let rest = order.iter().map(|&o| node_rest(&joints[o])).collect();
     let skeleton = Skeleton::new(
-        order.iter().map(|&o| joints[o].name().map_or_else(|| format!("joint{o}"), str::to_string)).collect(),
-        order.iter().map(|&o| parents[o].map(|p| remap[p])).collect(),
+        order
+            .iter()
+            .map(|&o| {
+                joints[o]
+                    .name()
+                    .map_or_else(|| format!("joint{o}"), str::to_string)
+            })
+            .collect(),
+        order
+            .iter()
+            .map(|&o| parents[o].map(|p| remap[p]))
+            .collect(),
         rest,
         order.iter().map(|&o| ibm[o]).collect(),
     )
@@ -92,16 +125,26 @@ fn node_rest(node: &gltf::Node) -> JointTransform {
 
 type MeshParts = (TriMesh, Vec<[f32; 3]>, Skin);
 
-fn read_mesh(mesh: &gltf::Mesh, buffers: &[gltf::buffer::Data], remap: &[usize]) -> Result<MeshParts, String> {
+fn read_mesh(
+    mesh: &gltf::Mesh,
+    buffers: &[gltf::buffer::Data],
+    remap: &[usize],
+) -> Result<MeshParts, String> {
     let mut positions = Vec::new();
     let mut normals = Vec::new();
     let mut uvs = Vec::new();
     let mut triangles = Vec::new();
     let mut influences: Vec<Vec<(u16, f32)>> = Vec::new();
-    for prim in mesh.primitives().filter(|p| p.mode() == gltf::mesh::Mode::Triangles) {
+    for prim in mesh
+        .primitives()
+        .filter(|p| p.mode() == gltf::mesh::Mode::Triangles)
+    {
         let reader = prim.reader(|b| Some(&buffers[b.index()]));
         let base = positions.len() as u32;
-        let pos: Vec<[f32; 3]> = reader.read_positions().ok_or("a primitive has no POSITION")?.collect();
+        let pos: Vec<[f32; 3]> = reader
+            .read_positions()
+            .ok_or("a primitive has no POSITION")?
+            .collect();
         let n = pos.len();
         positions.extend(pos);
         let nrm: Option<Vec<[f32; 3]>> = reader.read_normals().map(|it| it.collect());
@@ -111,18 +154,28 @@ fn read_mesh(mesh: &gltf::Mesh, buffers: &[gltf::buffer::Data], remap: &[usize])
         match reader.read_indices() {
             Some(idx) => {
                 let idx: Vec<u32> = idx.into_u32().collect();
-                triangles.extend(idx.chunks_exact(3).map(|t| [t[0] + base, t[1] + base, t[2] + base]));
+                triangles.extend(
+                    idx.chunks_exact(3)
+                        .map(|t| [t[0] + base, t[1] + base, t[2] + base]),
+                );
             }
-            None => triangles.extend((0..n as u32 / 3).map(|t| [base + 3 * t, base + 3 * t + 1, base + 3 * t + 2])),
+            None => triangles.extend(
+                (0..n as u32 / 3).map(|t| [base + 3 * t, base + 3 * t + 1, base + 3 * t + 2]),
+            ),
         }
         let mut vertex_influences = vec![Vec::new(); n];
         for set in 0..2 {
-            let (Some(j), Some(w)) = (reader.read_joints(set), reader.read_weights(set)) else { break };
+            let (Some(j), Some(w)) = (reader.read_joints(set), reader.read_weights(set)) else {
+                break;
+            };
             for (v, (j, w)) in j.into_u16().zip(w.into_f32()).enumerate() {
                 for k in 0..4 {
                     let slot = j[k] as usize;
                     if w[k] > 0.0 {
-                        let joint = *remap.get(slot).ok_or(format!("JOINTS_{set} refers to joint {slot}, the skin has {}", remap.len()))?;
+                        let joint = *remap.get(slot).ok_or(format!(
+                            "JOINTS_{set} refers to joint {slot}, the skin has {}",
+                            remap.len()
+                        ))?;
                         vertex_influences[v].push((joint as u16, w[k]));
                     }
                 }
@@ -138,6 +191,17 @@ fn read_mesh(mesh: &gltf::Mesh, buffers: &[gltf::buffer::Data], remap: &[usize])
         return Err("the skinned mesh has no JOINTS_0/WEIGHTS_0".into());
     }
     let skin = Skin::from_sparse(&influences, if most > 4 { 8 } else { 4 }, 0);
-    let uv = Some(FaceVaryingUv { coords: uvs, triangles: triangles.clone() });
-    Ok((TriMesh { positions, triangles, uv }, normals, skin))
+    let uv = Some(FaceVaryingUv {
+        coords: uvs,
+        triangles: triangles.clone(),
+    });
+    Ok((
+        TriMesh {
+            positions,
+            triangles,
+            uv,
+        },
+        normals,
+        skin,
+    ))
 }

@@ -26,7 +26,11 @@ impl SkelAnimation {
         self.translations[frame]
             .iter()
             .zip(&self.rotations[frame])
-            .map(|(t, r)| JointTransform { translation: *t, rotation: *r, scale: Vector3::repeat(1.0) })
+            .map(|(t, r)| JointTransform {
+                translation: *t,
+                rotation: *r,
+                scale: Vector3::repeat(1.0),
+            })
             .collect()
     }
 
@@ -45,8 +49,20 @@ impl SkelAnimation {
         SkelAnimation {
             name: self.name.clone(),
             fps: self.fps / step as f32,
-            translations: self.translations.iter().skip(start).step_by(step).cloned().collect(),
-            rotations: self.rotations.iter().skip(start).step_by(step).cloned().collect(),
+            translations: self
+                .translations
+                .iter()
+                .skip(start)
+                .step_by(step)
+                .cloned()
+                .collect(),
+            rotations: self
+                .rotations
+                .iter()
+                .skip(start)
+                .step_by(step)
+                .cloned()
+                .collect(),
         }
     }
 }

@@ -39,12 +39,22 @@ pub fn retarget(bvh: &Bvh, map: &Resolved, skeleton: &Skeleton, name: &str) -> R
         }
         translations.push(t);
     }
-    let mut animation = SkelAnimation { name: name.to_string(), fps: (1.0 / bvh.frame_time) as f32, translations, rotations };
+    let mut animation = SkelAnimation {
+        name: name.to_string(),
+        fps: (1.0 / bvh.frame_time) as f32,
+        translations,
+        rotations,
+    };
     let floor_offset = floor_offset(&animation, skeleton);
     for t in &mut animation.translations {
         t[root].y += floor_offset;
     }
-    Retargeted { animation, scale: rig.scale as f32, floor_offset, map_name: map.map_name.clone() }
+    Retargeted {
+        animation,
+        scale: rig.scale as f32,
+        floor_offset,
+        map_name: map.map_name.clone(),
+    }
 }
 
 /// Per body joint: the clip joint driving it and the rest correction.
@@ -65,10 +75,15 @@ impl RestMatch {
             }
         }
         let rest_world = skeleton.rest_world();
-        let body_pos: Vec<Vector3<f64>> = rest_world.iter().map(|m| m.fixed_view::<3, 1>(0, 3).into_owned().cast::<f64>()).collect();
+        let body_pos: Vec<Vector3<f64>> = rest_world
+            .iter()
+            .map(|m| m.fixed_view::<3, 1>(0, 3).into_owned().cast::<f64>())
+            .collect();
         let rest_world_rotation = rest_world
             .iter()
-            .map(|m| UnitQuaternion::from_matrix(&m.fixed_view::<3, 3>(0, 0).into_owned().cast::<f64>()))
+            .map(|m| {
+                UnitQuaternion::from_matrix(&m.fixed_view::<3, 3>(0, 0).into_owned().cast::<f64>())
+            })
             .collect();
         let clip_pos = bvh.world_rest_positions();
         let mut correction: Vec<UnitQuaternion<f64>> = Vec::with_capacity(n);
@@ -76,20 +91,32 @@ impl RestMatch {
             let pairs: Vec<_> = match (skeleton.parents[j], clip_of[j]) {
                 (Some(_), Some(k)) => skeleton
                     .children(j)
-                    .filter_map(|c| clip_of[c].map(|kc| (body_pos[c] - body_pos[j], clip_pos[kc] - clip_pos[k])))
+                    .filter_map(|c| {
+                        clip_of[c].map(|kc| (body_pos[c] - body_pos[j], clip_pos[kc] - clip_pos[k]))
+                    })
                     .filter(|(b, c)| b.norm() > 1e-6 && c.norm() > 1e-6)
                     .collect(),
                 _ => Vec::new(),
             };
-            let inherited = skeleton.parents[j].map_or(UnitQuaternion::identity(), |p| correction[p]);
+            let inherited =
+                skeleton.parents[j].map_or(UnitQuaternion::identity(), |p| correction[p]);
             correction.push(fit_rotation(&pairs).unwrap_or(inherited));
         }
         let scale = hip_height(&body_pos, None) / hip_height(&clip_pos, Some(&clip_of)).max(1e-9);
-        RestMatch { clip_of, correction, rest_world_rotation, scale }
+        RestMatch {
+            clip_of,
+            correction,
+            rest_world_rotation,
+            scale,
+        }
     }
 
     /// Local rotations of the body for one clip pose (world rotations per clip joint).
-    fn local_rotations(&self, skeleton: &Skeleton, pose: &[(Vector3<f64>, UnitQuaternion<f64>)]) -> Vec<UnitQuaternion<f32>> {
+    fn local_rotations(
+        &self,
+        skeleton: &Skeleton,
+        pose: &[(Vector3<f64>, UnitQuaternion<f64>)],
+    ) -> Vec<UnitQuaternion<f32>> {
         let n = skeleton.joint_count();
         let mut world: Vec<UnitQuaternion<f64>> = Vec::with_capacity(n);
         let mut local = Vec::with_capacity(n);
@@ -97,7 +124,10 @@ impl RestMatch {
             let parent = skeleton.parents[j].map(|p| world[p]);
             let g = match self.clip_of[j] {
                 Some(k) => pose[k].1 * self.correction[j] * self.rest_world_rotation[j],
-                None => parent.unwrap_or_else(UnitQuaternion::identity) * skeleton.rest[j].rotation.cast::<f64>(),
+                None => {
+                    parent.unwrap_or_else(UnitQuaternion::identity)
+                        * skeleton.rest[j].rotation.cast::<f64>()
+                }
             };
             let l = parent.map_or(g, |p| p.inverse() * g);
             world.push(g);
@@ -114,12 +144,17 @@ fn fit_rotation(pairs: &[(Vector3<f64>, Vector3<f64>)]) -> Option<UnitQuaternion
         [(b, c)] => Some(shortest_arc(&b.normalize(), &c.normalize())),
         _ => {
             // Kabsch: maximise Σ cᵢ·(R bᵢ) over unit directions.
-            let h: Matrix3<f64> = pairs.iter().map(|(b, c)| c.normalize() * b.normalize().transpose()).sum();
+            let h: Matrix3<f64> = pairs
+                .iter()
+                .map(|(b, c)| c.normalize() * b.normalize().transpose())
+                .sum();
             let svd = h.svd(true, true);
             let (u, v_t) = (svd.u?, svd.v_t?);
             let d = (u * v_t).determinant().signum();
             let r = u * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d)) * v_t;
-            Some(UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r)))
+            Some(UnitQuaternion::from_rotation_matrix(
+                &Rotation3::from_matrix_unchecked(r),
+            ))
         }
     }
 }
@@ -127,7 +162,11 @@ fn fit_rotation(pairs: &[(Vector3<f64>, Vector3<f64>)]) -> Option<UnitQuaternion
 fn shortest_arc(a: &Vector3<f64>, b: &Vector3<f64>) -> UnitQuaternion<f64> {
     UnitQuaternion::rotation_between(a, b).unwrap_or_else(|| {
         // Opposite directions: half a turn about any perpendicular axis.
-        let axis = if a.x.abs() < 0.9 { a.cross(&Vector3::x()) } else { a.cross(&Vector3::y()) };
+        let axis = if a.x.abs() < 0.9 {
+            a.cross(&Vector3::x())
+        } else {
+            a.cross(&Vector3::y())
+        };
         UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_normalize(axis), std::f64::consts::PI)
     })
 }
@@ -149,7 +188,13 @@ fn hip_height(pos: &[Vector3<f64>], mapped: Option<&[Option<usize>]>) -> f64 {
 /// Offset that brings the lowest joint back to its rest height in the stance frames: the 10th
 /// percentile of the per-frame lowest-joint drop (robust to jumps, which lift the feet).
 fn floor_offset(anim: &SkelAnimation, skeleton: &Skeleton) -> f32 {
-    let rest_low = lowest_joint(&skeleton.rest_world().iter().map(|m| m.fixed_view::<3, 1>(0, 3).into_owned()).collect::<Vec<_>>());
+    let rest_low = lowest_joint(
+        &skeleton
+            .rest_world()
+            .iter()
+            .map(|m| m.fixed_view::<3, 1>(0, 3).into_owned())
+            .collect::<Vec<_>>(),
+    );
     let mut drops: Vec<f32> = (0..anim.frame_count())
         .map(|f| lowest_joint(&anim.joint_positions(skeleton, f)) - rest_low)
         .collect();

@@ -14,7 +14,11 @@ pub struct JointTransform {
 
 impl JointTransform {
     pub fn from_translation(t: Vector3<f32>) -> Self {
-        JointTransform { translation: t, rotation: UnitQuaternion::identity(), scale: Vector3::repeat(1.0) }
+        JointTransform {
+            translation: t,
+            rotation: UnitQuaternion::identity(),
+            scale: Vector3::repeat(1.0),
+        }
     }
 
     pub fn to_matrix(&self) -> Matrix4<f32> {
@@ -47,21 +51,33 @@ impl Skeleton {
     ) -> Result<Self, RigError> {
         let n = joint_names.len();
         if parents.len() != n || rest.len() != n || inverse_bind.len() != n {
-            return Err(RigError::Invalid(format!("skeleton arrays disagree on the joint count ({n})")));
+            return Err(RigError::Invalid(format!(
+                "skeleton arrays disagree on the joint count ({n})"
+            )));
         }
         if n == 0 {
             return Err(RigError::Invalid("skeleton has no joints".into()));
         }
         for (j, p) in parents.iter().enumerate() {
             if p.is_some_and(|p| p >= j) {
-                return Err(RigError::Invalid(format!("joint '{}' comes before its parent", joint_names[j])));
+                return Err(RigError::Invalid(format!(
+                    "joint '{}' comes before its parent",
+                    joint_names[j]
+                )));
             }
         }
         let mut seen = std::collections::HashSet::new();
         if let Some(dup) = joint_names.iter().find(|n| !seen.insert(n.as_str())) {
-            return Err(RigError::Invalid(format!("joint name '{dup}' appears twice")));
+            return Err(RigError::Invalid(format!(
+                "joint name '{dup}' appears twice"
+            )));
         }
-        Ok(Skeleton { joint_names, parents, rest, inverse_bind })
+        Ok(Skeleton {
+            joint_names,
+            parents,
+            rest,
+            inverse_bind,
+        })
     }
 
     /// Builds a skeleton from rest world positions only (joint frames aligned with the world axes),
@@ -78,12 +94,22 @@ impl Skeleton {
             new_index[old] = new;
         }
         let joint_names = order.iter().map(|&o| names[o].clone()).collect();
-        let new_parents: Vec<_> = order.iter().map(|&o| parents[o].map(|p| new_index[p])).collect();
+        let new_parents: Vec<_> = order
+            .iter()
+            .map(|&o| parents[o].map(|p| new_index[p]))
+            .collect();
         let rest = order
             .iter()
-            .map(|&o| JointTransform::from_translation(world[o] - parents[o].map_or(Vector3::zeros(), |p| world[p])))
+            .map(|&o| {
+                JointTransform::from_translation(
+                    world[o] - parents[o].map_or(Vector3::zeros(), |p| world[p]),
+                )
+            })
             .collect();
-        let inverse_bind = order.iter().map(|&o| Matrix4::new_translation(&-world[o])).collect();
+        let inverse_bind = order
+            .iter()
+            .map(|&o| Matrix4::new_translation(&-world[o]))
+            .collect();
         Skeleton::new(joint_names, new_parents, rest, inverse_bind)
     }
 
@@ -96,7 +122,11 @@ impl Skeleton {
     }
 
     pub fn children(&self, joint: usize) -> impl Iterator<Item = usize> + '_ {
-        self.parents.iter().enumerate().filter(move |(_, p)| **p == Some(joint)).map(|(c, _)| c)
+        self.parents
+            .iter()
+            .enumerate()
+            .filter(move |(_, p)| **p == Some(joint))
+            .map(|(c, _)| c)
     }
 
     /// Forward kinematics: world matrix of every joint for the given local transforms.
@@ -118,7 +148,11 @@ impl Skeleton {
 
     /// World matrix × inverse bind: what linear blend skinning applies to rest points.
     pub fn skinning_matrices(&self, local: &[JointTransform]) -> Vec<Matrix4<f32>> {
-        self.world_matrices(local).iter().zip(&self.inverse_bind).map(|(w, ib)| w * ib).collect()
+        self.world_matrices(local)
+            .iter()
+            .zip(&self.inverse_bind)
+            .map(|(w, ib)| w * ib)
+            .collect()
     }
 
     /// True when both skeletons have the same joints in the same order with the same parents.
@@ -155,7 +189,11 @@ mod tests {
         let names: Vec<String> = ["b", "a", "c"].iter().map(|s| s.to_string()).collect();
         // input order: b's parent is a, a is root, c's parent is b.
         let parents = [Some(1), None, Some(0)];
-        let world = [Vector3::new(0.0, 1.0, 0.0), Vector3::zeros(), Vector3::new(0.0, 2.0, 0.0)];
+        let world = [
+            Vector3::new(0.0, 1.0, 0.0),
+            Vector3::zeros(),
+            Vector3::new(0.0, 2.0, 0.0),
+        ];
         Skeleton::from_world_positions(&names, &parents, &world).unwrap()
     }
 
@@ -173,18 +211,29 @@ mod tests {
     fn fk_rotates_children_about_parent() {
         let s = chain();
         let mut pose = s.rest.clone();
-        pose[1].rotation = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f32::consts::FRAC_PI_2);
+        pose[1].rotation =
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f32::consts::FRAC_PI_2);
         let world = s.world_matrices(&pose);
         let tip = world[2].transform_point(&nalgebra::Point3::origin());
         // c sits 1 above b; rotating b by 90° about z swings it to -x.
-        assert!((tip.coords - Vector3::new(-1.0, 1.0, 0.0)).norm() < 1e-6, "{tip}");
+        assert!(
+            (tip.coords - Vector3::new(-1.0, 1.0, 0.0)).norm() < 1e-6,
+            "{tip}"
+        );
     }
 
     #[test]
     fn rejects_cycles_and_duplicates() {
         let names: Vec<String> = ["a", "b"].iter().map(|s| s.to_string()).collect();
-        assert!(Skeleton::from_world_positions(&names, &[Some(1), Some(0)], &[Vector3::zeros(); 2]).is_err());
+        assert!(Skeleton::from_world_positions(
+            &names,
+            &[Some(1), Some(0)],
+            &[Vector3::zeros(); 2]
+        )
+        .is_err());
         let dup: Vec<String> = ["a", "a"].iter().map(|s| s.to_string()).collect();
-        assert!(Skeleton::from_world_positions(&dup, &[None, Some(0)], &[Vector3::zeros(); 2]).is_err());
+        assert!(
+            Skeleton::from_world_positions(&dup, &[None, Some(0)], &[Vector3::zeros(); 2]).is_err()
+        );
     }
 }

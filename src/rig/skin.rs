@@ -13,11 +13,16 @@ pub struct Skin {
 impl Skin {
     /// Keeps the `influences` largest weights per vertex and renormalises them to sum to 1
     /// (empty slots: joint 0, weight 0). A vertex with no weight at all binds to `fallback_joint`.
-    pub fn from_sparse(per_vertex: &[Vec<(u16, f32)>], influences: usize, fallback_joint: u16) -> Skin {
+    pub fn from_sparse(
+        per_vertex: &[Vec<(u16, f32)>],
+        influences: usize,
+        fallback_joint: u16,
+    ) -> Skin {
         let mut joint_indices = Vec::with_capacity(per_vertex.len() * influences);
         let mut joint_weights = Vec::with_capacity(per_vertex.len() * influences);
         for list in per_vertex {
-            let mut list: Vec<(u16, f32)> = list.iter().copied().filter(|(_, w)| *w > 0.0).collect();
+            let mut list: Vec<(u16, f32)> =
+                list.iter().copied().filter(|(_, w)| *w > 0.0).collect();
             // Largest first; ties broken by joint index so the result is deterministic.
             list.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
             list.truncate(influences);
@@ -38,7 +43,11 @@ impl Skin {
                 }
             }
         }
-        Skin { influences, joint_indices, joint_weights }
+        Skin {
+            influences,
+            joint_indices,
+            joint_weights,
+        }
     }
 
     pub fn vertex_count(&self) -> usize {
@@ -48,7 +57,10 @@ impl Skin {
     /// `(joint, weight)` pairs of one vertex, zero weights included.
     pub fn vertex(&self, v: usize) -> impl Iterator<Item = (usize, f32)> + '_ {
         let r = v * self.influences..(v + 1) * self.influences;
-        self.joint_indices[r.clone()].iter().zip(&self.joint_weights[r]).map(|(&j, &w)| (j as usize, w))
+        self.joint_indices[r.clone()]
+            .iter()
+            .zip(&self.joint_weights[r])
+            .map(|(&j, &w)| (j as usize, w))
     }
 
     /// Linear blend skinning: `Σ w_j M_j p` for every rest point.
@@ -85,17 +97,33 @@ mod tests {
 
     #[test]
     fn keeps_top_weights_and_normalises() {
-        let skin = Skin::from_sparse(&[vec![(3, 0.1), (1, 0.5), (2, 0.3), (4, 0.05), (5, 0.05)], vec![]], 4, 7);
+        let skin = Skin::from_sparse(
+            &[
+                vec![(3, 0.1), (1, 0.5), (2, 0.3), (4, 0.05), (5, 0.05)],
+                vec![],
+            ],
+            4,
+            7,
+        );
         let v0: Vec<_> = skin.vertex(0).collect();
         assert_eq!(v0.iter().map(|x| x.0).collect::<Vec<_>>(), [1, 2, 3, 4]);
         assert!((v0.iter().map(|x| x.1).sum::<f32>() - 1.0).abs() < 1e-7);
-        assert_eq!(skin.vertex(1).collect::<Vec<_>>(), [(7, 1.0), (0, 0.0), (0, 0.0), (0, 0.0)]);
+        assert_eq!(
+            skin.vertex(1).collect::<Vec<_>>(),
+            [(7, 1.0), (0, 0.0), (0, 0.0), (0, 0.0)]
+        );
     }
 
     #[test]
     fn blends_matrices_linearly() {
         let skin = Skin::from_sparse(&[vec![(0, 0.5), (1, 0.5)]], 2, 0);
-        let m = [Matrix4::identity(), Matrix4::new_translation(&Vector3::new(2.0, 0.0, 0.0))];
-        assert_eq!(skin.skin_points(&[[0.0, 1.0, 0.0]], &m), vec![[1.0, 1.0, 0.0]]);
+        let m = [
+            Matrix4::identity(),
+            Matrix4::new_translation(&Vector3::new(2.0, 0.0, 0.0)),
+        ];
+        assert_eq!(
+            skin.skin_points(&[[0.0, 1.0, 0.0]], &m),
+            vec![[1.0, 1.0, 0.0]]
+        );
     }
 }
