@@ -51,7 +51,13 @@ pub fn run(args: Args) -> Result<i32> {
         .provenance
         .push(("body".into(), args.body.display().to_string()));
     let mut report = Vec::new();
+    let bar = super::progress(
+        args.motions.len() as u64,
+        "retarget",
+        args.json || args.motions.len() < 2,
+    );
     for path in &args.motions {
+        bar.inc(1);
         let clip = load_clip(path, &maps, &body.skeleton, args.fps)?;
         let a = &clip.animation;
         if !args.json {
@@ -69,6 +75,7 @@ pub fn run(args: Args) -> Result<i32> {
             .provenance
             .push((format!("clip:{}", a.name), path.display().to_string()));
     }
+    bar.finish_and_clear();
     exporters::gltf::write(&asset, &args.out)
         .with_context(|| format!("writing {}", args.out.display()))?;
     if args.json {

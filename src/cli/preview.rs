@@ -141,7 +141,8 @@ pub fn run(args: Args) -> Result<i32> {
 }
 
 fn frame_label(anim: &SkelAnimation, frame: usize) -> String {
-    format!("{} f{} {:.2}s", anim.name, frame, frame as f32 / anim.fps)
+    // Short: the panel is narrow and the clip name is in the file name.
+    format!("f{} {:.2}s", frame, frame as f32 / anim.fps)
 }
 
 /// The frames to show: an explicit list, or `count` evenly spaced ones (first and last included).

@@ -685,7 +685,12 @@ mod tests {
     fn base_obj_path() -> PathBuf {
         std::env::var_os("GARMENTBAKE_BASE_OBJ")
             .map(PathBuf::from)
-            .unwrap_or_else(|| PathBuf::from("/work/shared/data/makehuman/base.obj"))
+            .unwrap_or_else(|| {
+                PathBuf::from(concat!(
+                    env!("CARGO_MANIFEST_DIR"),
+                    "/../shared/data/makehuman/base.obj"
+                ))
+            })
     }
 
     fn base_obj() -> ObjMesh {

@@ -324,7 +324,10 @@ fn save_png_reports_unwritable_path() {
 
 // ---- real mesh -------------------------------------------------------------
 
-const BASE_OBJ: &str = "/work/shared/data/makehuman/base.obj";
+const BASE_OBJ: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../shared/data/makehuman/base.obj"
+);
 /// MakeHuman body vertices; later ones are helper geometry (clothes proxies, joints).
 const BODY_VERTS: usize = 13380;
 
@@ -394,10 +397,8 @@ fn skirt(body: &[[f32; 3]], rings: u32, around: u32) -> TriMesh {
 
 #[test]
 fn renders_makehuman_body_sheet() {
-    let Some((pos, tris)) = load_body() else {
-        eprintln!("skipping: {BASE_OBJ} not found");
-        return;
-    };
+    let (pos, tris) = load_body()
+        .unwrap_or_else(|| panic!("{BASE_OBJ} not found (../shared must sit beside the repo)"));
     let (spos, stris) = skirt(&pos, 40, 72);
     let body = mesh(&pos, &tris, BODY_GREY);
     let garment = mesh(&spos, &stris, GARMENT_COLORS[0]);

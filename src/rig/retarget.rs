@@ -41,19 +41,27 @@ pub fn retarget(bvh: &Bvh, map: &Resolved, skeleton: &Skeleton, name: &str) -> R
     }
     let mut animation = SkelAnimation {
         name: name.to_string(),
-        fps: (1.0 / bvh.frame_time) as f32,
+        fps: snap_rate(1.0 / bvh.frame_time),
         translations,
         rotations,
     };
-    let floor_offset = floor_offset(&animation, skeleton);
-    for t in &mut animation.translations {
-        t[root].y += floor_offset;
-    }
+    let floor_offset = ground(&mut animation, skeleton);
     Retargeted {
         animation,
         scale: rig.scale as f32,
         floor_offset,
         map_name: map.map_name.clone(),
+    }
+}
+
+/// BVH frame times are written rounded (CMU: .0083333 s): a rate within 0.01 % of a whole number
+/// is that number, so key times and USD time codes land on whole frames.
+fn snap_rate(fps: f64) -> f32 {
+    let whole = fps.round();
+    if (fps - whole).abs() < 1e-4 * fps {
+        whole as f32
+    } else {
+        fps as f32
     }
 }
 
@@ -185,26 +193,47 @@ fn hip_height(pos: &[Vector3<f64>], mapped: Option<&[Option<usize>]>) -> f64 {
     root_y - lowest
 }
 
-/// Offset that brings the lowest joint back to its rest height in the stance frames: the 10th
-/// percentile of the per-frame lowest-joint drop (robust to jumps, which lift the feet).
-fn floor_offset(anim: &SkelAnimation, skeleton: &Skeleton) -> f32 {
-    let rest_low = lowest_joint(
-        &skeleton
-            .rest_world()
-            .iter()
-            .map(|m| m.fixed_view::<3, 1>(0, 3).into_owned())
-            .collect::<Vec<_>>(),
-    );
-    let mut drops: Vec<f32> = (0..anim.frame_count())
-        .map(|f| lowest_joint(&anim.joint_positions(skeleton, f)) - rest_low)
+/// Foot contact: per frame, how far the feet sit above (+) or below (−) their rest height, taking
+/// for each frame the foot joint closest to its rest height (heel strike: the ankle; tiptoe: the
+/// toe). Foot joints are those within 12 cm of the lowest joint at rest.
+fn foot_clearance(anim: &SkelAnimation, skeleton: &Skeleton) -> Vec<f32> {
+    let rest: Vec<f32> = skeleton.rest_world().iter().map(|m| m[(1, 3)]).collect();
+    let lowest = rest.iter().copied().fold(f32::INFINITY, f32::min);
+    let feet: Vec<usize> = (0..rest.len())
+        .filter(|&j| rest[j] < lowest + 0.12)
         .collect();
-    if drops.is_empty() {
-        return 0.0;
-    }
-    drops.sort_by(f32::total_cmp);
-    -drops[drops.len() / 10]
+    (0..anim.frame_count())
+        .map(|f| {
+            let pos = anim.joint_positions(skeleton, f);
+            feet.iter()
+                .map(|&j| pos[j].y - rest[j])
+                .fold(f32::INFINITY, f32::min)
+        })
+        .collect()
 }
 
-fn lowest_joint(pos: &[Vector3<f32>]) -> f32 {
-    pos.iter().map(|p| p.y).fold(f32::INFINITY, f32::min)
+/// Puts the feet on the floor: a constant offset (10th percentile of the clearance, robust to
+/// jumps), then a per-frame correction of what remains while the feet are near the floor (full
+/// within 5 cm, fading out by 15 cm so jumps stay jumps), smoothed over ±0.1 s. Other proportions
+/// than the performer's (a wide stance lowers their hips less than ours) otherwise float the feet.
+fn ground(anim: &mut SkelAnimation, skeleton: &Skeleton) -> f32 {
+    let clearance = foot_clearance(anim, skeleton);
+    if clearance.is_empty() {
+        return 0.0;
+    }
+    let mut sorted = clearance.clone();
+    sorted.sort_by(f32::total_cmp);
+    let offset = -sorted[sorted.len() / 10];
+    let residual: Vec<f32> = clearance.iter().map(|c| c + offset).collect();
+    let correction: Vec<f32> = residual.iter().map(|&r| -r * contact_weight(r)).collect();
+    let half = (0.1 * anim.fps).round() as usize;
+    for (f, t) in anim.translations.iter_mut().enumerate() {
+        let window = &correction[f.saturating_sub(half)..(f + half + 1).min(correction.len())];
+        t[0].y += offset + window.iter().sum::<f32>() / window.len() as f32;
+    }
+    offset
+}
+
+fn contact_weight(residual: f32) -> f32 {
+    ((0.15 - residual.abs()) / 0.10).clamp(0.0, 1.0)
 }

@@ -30,17 +30,10 @@ impl Skin {
                 list.push((fallback_joint, 1.0));
             }
             let weights = normalized(&list.iter().map(|(_, w)| *w).collect::<Vec<_>>());
-            for k in 0..influences {
-                match list.get(k) {
-                    Some(&(j, _)) => {
-                        joint_indices.push(j);
-                        joint_weights.push(weights[k]);
-                    }
-                    None => {
-                        joint_indices.push(0);
-                        joint_weights.push(0.0);
-                    }
-                }
+            let padding = std::iter::repeat_n((0, 0.0), influences - list.len());
+            for (j, w) in list.iter().map(|p| p.0).zip(weights).chain(padding) {
+                joint_indices.push(j);
+                joint_weights.push(w);
             }
         }
         Skin {

@@ -1,0 +1,13 @@
+#!/usr/bin/env bash
+# The whole test suite: set-up, formatting and lints, unit + integration tests (independent
+# readers included: Khronos validator, three.js, Blender, usd-core), and the reader self-test.
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$root"
+bash scripts/setup.sh
+cargo fmt --all -- --check
+cargo clippy --workspace --all-targets --quiet -- -D warnings
+bash tools/selftest.sh target/selftest >/dev/null
+# Two shared cores: tests that spawn Blender or Node run alongside, torch stays on one thread.
+RUST_TEST_THREADS=2 cargo test --workspace --quiet
+echo "all tests passed"

@@ -1,0 +1,127 @@
+//! Shared helpers for the integration tests: paths, running our binary and the independent readers.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+pub fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+pub fn sample(rel: &str) -> PathBuf {
+    root().join("samples").join(rel)
+}
+
+/// A fresh scratch folder per test under target/test-out.
+pub fn out_dir(test: &str) -> PathBuf {
+    let dir = root().join("target/test-out").join(test);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("create test output dir");
+    dir
+}
+
+pub fn garmentbake(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_garmentbake"))
+        .args(args)
+        .output()
+        .expect("run garmentbake")
+}
+
+/// Runs garmentbake and panics with its stderr unless it succeeds; returns stdout.
+pub fn garmentbake_ok(args: &[&str]) -> String {
+    let out = garmentbake(args);
+    assert!(
+        out.status.success(),
+        "garmentbake {args:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// Khronos glTF validator (tools/node/validate.mjs): (errors+warnings == 0, summary line).
+pub fn khronos_validate(file: &Path) -> (bool, String) {
+    let out = Command::new("node")
+        .arg(root().join("tools/node/validate.mjs"))
+        .arg(file)
+        .output()
+        .expect("node is installed by scripts/setup.sh");
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (out.status.success(), text)
+}
+
+/// three.js GLTFLoader + AnimationMixer in Node: world positions of every mesh at `times`.
+pub fn threejs_positions(file: &Path, times: &[f32], animation: usize) -> serde_json::Value {
+    let json = file.with_extension("three.json");
+    let times: Vec<String> = times.iter().map(|t| format!("{t:.9}")).collect();
+    let out = Command::new("node")
+        .arg(root().join("tools/node/skin_eval.mjs"))
+        .arg(file)
+        .args([
+            "--times",
+            &times.join(","),
+            "--animation",
+            &animation.to_string(),
+            "--out",
+        ])
+        .arg(&json)
+        .output()
+        .expect("node");
+    assert!(
+        out.status.success(),
+        "skin_eval failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_str(&std::fs::read_to_string(&json).expect("three.js result")).expect("JSON")
+}
+
+/// Blender's own glTF importer, evaluated at scene `frames` with the scene at `fps`.
+pub fn blender_positions(file: &Path, frames: &[usize], fps: f32) -> serde_json::Value {
+    let json = file.with_extension("blender.json");
+    let frames: Vec<String> = frames.iter().map(|f| f.to_string()).collect();
+    let out = Command::new("blender")
+        .args(["-b", "--factory-startup", "--python"])
+        .arg(root().join("tools/blender/eval_gltf.py"))
+        .arg("--")
+        .arg(file)
+        .args([
+            "--frames",
+            &frames.join(","),
+            "--fps",
+            &fps.to_string(),
+            "--out",
+        ])
+        .arg(&json)
+        .output()
+        .expect("blender is installed by scripts/setup.sh");
+    assert!(
+        out.status.success(),
+        "blender failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_str(&std::fs::read_to_string(&json).expect("blender result")).expect("JSON")
+}
+
+/// Flat `[x0, y0, z0, ...]` JSON numbers.
+pub fn flat_positions(v: &serde_json::Value) -> Vec<[f32; 3]> {
+    let a: Vec<f32> = v
+        .as_array()
+        .expect("array")
+        .iter()
+        .map(|x| x.as_f64().expect("number") as f32)
+        .collect();
+    a.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()
+}
+
+pub fn max_distance(a: &[[f32; 3]], b: &[[f32; 3]]) -> f32 {
+    assert_eq!(a.len(), b.len(), "vertex counts differ");
+    a.iter()
+        .zip(b)
+        .map(|(p, q)| {
+            ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt()
+        })
+        .fold(0.0, f32::max)
+}

@@ -1,0 +1,152 @@
+//! Bad input gets one clear line on stderr naming the file and the problem, a non-zero exit code,
+//! and never a panic trace.
+
+mod common;
+use common::*;
+use std::path::Path;
+
+/// Runs garmentbake expecting failure; returns the single stderr line.
+fn fails(args: &[&str]) -> String {
+    let out = garmentbake(args);
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(!out.status.success(), "expected failure for {args:?}");
+    assert!(!stderr.contains("panicked"), "panic: {stderr}");
+    let lines: Vec<&str> = stderr.lines().filter(|l| !l.trim().is_empty()).collect();
+    assert_eq!(lines.len(), 1, "one line expected, got: {stderr}");
+    assert!(lines[0].starts_with("error: "), "{stderr}");
+    lines[0].to_string()
+}
+
+fn pose_with(motion: &Path, out: &Path) -> String {
+    fails(&[
+        "pose",
+        "--body",
+        sample("body.glb").to_str().unwrap(),
+        "--motion",
+        motion.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ])
+}
+
+#[test]
+fn truncated_bvh_is_reported_with_the_frames_found() {
+    let dir = out_dir("err_truncated");
+    let text = std::fs::read_to_string(sample("motions/131_01.bvh")).unwrap();
+    let cut = dir.join("cut.bvh");
+    std::fs::write(&cut, &text[..text.len() / 2]).unwrap();
+    let out = dir.join("x.glb");
+    let msg = pose_with(&cut, &out);
+    assert!(msg.contains("cut.bvh") && msg.contains("994"), "{msg}");
+    assert!(!out.exists(), "no output on failure");
+}
+
+#[test]
+fn bvh_joint_unknown_to_every_map_is_named() {
+    let dir = out_dir("err_joint");
+    let text = std::fs::read_to_string(sample("motions/01_01.bvh"))
+        .unwrap()
+        .replacen("JOINT LeftUpLeg", "JOINT LeftThigh", 1);
+    let clip = dir.join("renamed.bvh");
+    std::fs::write(&clip, text).unwrap();
+    let msg = pose_with(&clip, &dir.join("x.glb"));
+    assert!(
+        msg.contains("renamed.bvh") && msg.contains("LeftThigh") && msg.contains("--map"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn obj_face_index_out_of_range_is_reported_with_its_line() {
+    let dir = out_dir("err_obj");
+    let obj = dir.join("bad.obj");
+    std::fs::write(&obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 9\n").unwrap();
+    let msg = fails(&["inspect", obj.to_str().unwrap()]);
+    assert!(
+        msg.contains("bad.obj:5") && msg.contains("out of range"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn glb_without_a_skin_is_not_a_body() {
+    let dir = out_dir("err_noskin");
+    let glb = dir.join("static.glb");
+    let mesh = exporters::asset::Mesh {
+        name: "tri".into(),
+        points: vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+        triangles: vec![[0, 1, 2]],
+        source_vertex: vec![0, 1, 2],
+        ..Default::default()
+    };
+    exporters::gltf::write(
+        &exporters::BakedAsset {
+            meshes: vec![mesh],
+            ..Default::default()
+        },
+        &glb,
+    )
+    .unwrap();
+    let msg = fails(&[
+        "pose",
+        "--body",
+        glb.to_str().unwrap(),
+        "--motion",
+        sample("motions/131_01.bvh").to_str().unwrap(),
+        "--out",
+        dir.join("x.glb").to_str().unwrap(),
+    ]);
+    assert!(
+        msg.contains("static.glb") && msg.contains("no skinned mesh"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn unwritable_output_leaves_nothing_behind() {
+    let msg = fails(&[
+        "pose",
+        "--body",
+        sample("body.glb").to_str().unwrap(),
+        "--motion",
+        sample("motions/131_01.bvh").to_str().unwrap(),
+        "--out",
+        "/nonexistent-dir/x.glb",
+    ]);
+    assert!(msg.contains("/nonexistent-dir/x.glb"), "{msg}");
+}
+
+#[test]
+fn every_command_has_help() {
+    for cmd in ["inspect", "pose", "preview"] {
+        let out = garmentbake_ok(&[cmd, "--help"]);
+        assert!(out.contains("Usage: garmentbake"), "{cmd}: {out}");
+    }
+    let top = garmentbake_ok(&["--help"]);
+    assert!(top.contains("metres, Y-up"), "{top}");
+}
+
+#[test]
+fn inspect_describes_each_sample_kind() {
+    let glb = garmentbake_ok(&["inspect", "--json", sample("body.glb").to_str().unwrap()]);
+    let v: serde_json::Value = serde_json::from_str(&glb).unwrap();
+    assert_eq!(v["skins"][0]["joints"].as_array().unwrap().len(), 31);
+    let bvh: serde_json::Value = serde_json::from_str(&garmentbake_ok(&[
+        "inspect",
+        "--json",
+        sample("motions/131_02.bvh").to_str().unwrap(),
+    ]))
+    .unwrap();
+    assert_eq!(bvh["frames"], 1247);
+    let obj: serde_json::Value = serde_json::from_str(&garmentbake_ok(&[
+        "inspect",
+        "--json",
+        sample("garments/skirt.obj").to_str().unwrap(),
+    ]))
+    .unwrap();
+    assert_eq!(
+        obj["boundary_loops"].as_array().unwrap().len(),
+        2,
+        "waist and hem"
+    );
+}

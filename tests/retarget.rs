@@ -1,0 +1,127 @@
+//! Retargeting real CMU clips onto the sample body: feet on the floor in stance, body upright.
+
+mod common;
+use common::*;
+use garmentbake::io::gltf_body::read_body;
+use garmentbake::motion::load_clip;
+
+/// Lowest vertex height of the vertices mostly skinned to `joints`, for every frame.
+fn lowest_vertex(
+    body: &garmentbake::io::gltf_body::Body,
+    anim: &garmentbake::rig::SkelAnimation,
+    joints: &[usize],
+) -> Vec<f32> {
+    let region: Vec<usize> = (0..body.mesh.vertex_count())
+        .filter(|&v| {
+            body.skin
+                .vertex(v)
+                .max_by(|a, b| a.1.total_cmp(&b.1))
+                .is_some_and(|(j, _)| joints.contains(&j))
+        })
+        .collect();
+    (0..anim.frame_count())
+        .map(|f| {
+            let skinning = body.skeleton.skinning_matrices(&anim.local_pose(f));
+            let pts: Vec<[f32; 3]> = region.iter().map(|&v| body.mesh.positions[v]).collect();
+            let sub = garmentbake::rig::Skin {
+                influences: body.skin.influences,
+                joint_indices: region
+                    .iter()
+                    .flat_map(|&v| {
+                        body.skin.joint_indices
+                            [v * body.skin.influences..(v + 1) * body.skin.influences]
+                            .to_vec()
+                    })
+                    .collect(),
+                joint_weights: region
+                    .iter()
+                    .flat_map(|&v| {
+                        body.skin.joint_weights
+                            [v * body.skin.influences..(v + 1) * body.skin.influences]
+                            .to_vec()
+                    })
+                    .collect(),
+            };
+            sub.skin_points(&pts, &skinning)
+                .iter()
+                .map(|p| p[1])
+                .fold(f32::INFINITY, f32::min)
+        })
+        .collect()
+}
+
+#[test]
+fn retargeted_walk_keeps_stance_feet_on_the_floor_and_the_body_upright() {
+    let body = read_body(&sample("body.glb")).unwrap();
+    let sk = &body.skeleton;
+    let anim = load_clip(&sample("motions/131_01.bvh"), &[], sk, None)
+        .unwrap()
+        .animation;
+    let j = |n: &str| sk.joint_index(n).unwrap();
+    let mut stance_errors = Vec::new();
+    for side in ["Left", "Right"] {
+        let foot = j(&format!("{side}Foot"));
+        let low = lowest_vertex(&body, &anim, &[foot, j(&format!("{side}ToeBase"))]);
+        let pos: Vec<_> = (0..anim.frame_count())
+            .map(|f| anim.joint_positions(sk, f)[foot])
+            .collect();
+        // Stance: the foot joint moves slower than 0.2 m/s horizontally.
+        for f in 1..anim.frame_count() {
+            let v = (pos[f] - pos[f - 1]).xz().norm() * anim.fps;
+            if v < 0.2 {
+                stance_errors.push(low[f].abs());
+            }
+        }
+    }
+    stance_errors.sort_by(f32::total_cmp);
+    let p95 = stance_errors[stance_errors.len() * 95 / 100];
+    let median = stance_errors[stance_errors.len() / 2];
+    eprintln!(
+        "stance frames: {}, |lowest foot vertex height| median {:.1} mm, p95 {:.1} mm",
+        stance_errors.len(),
+        median * 1e3,
+        p95 * 1e3
+    );
+    assert!(stance_errors.len() > 200, "too few stance frames");
+    assert!(
+        p95 < 0.03,
+        "95 % of stance frames within 3 cm of the floor, got {:.1} mm",
+        p95 * 1e3
+    );
+
+    // Upright: the hips→neck direction stays near vertical for most of the clip.
+    let tilts: Vec<f32> = (0..anim.frame_count())
+        .map(|f| {
+            let p = anim.joint_positions(sk, f);
+            let up = (p[j("Neck")] - p[j("Hips")]).normalize();
+            up.y.clamp(-1.0, 1.0).acos().to_degrees()
+        })
+        .collect();
+    let mut sorted = tilts.clone();
+    sorted.sort_by(f32::total_cmp);
+    eprintln!(
+        "spine tilt: median {:.1}°, p90 {:.1}°",
+        sorted[sorted.len() / 2],
+        sorted[sorted.len() * 9 / 10]
+    );
+    assert!(
+        sorted[sorted.len() / 2] < 15.0,
+        "median spine tilt {:.1}°",
+        sorted[sorted.len() / 2]
+    );
+}
+
+#[test]
+fn both_cmu_namings_are_recognised_without_a_map() {
+    let body = read_body(&sample("body.glb")).unwrap();
+    let mb = load_clip(&sample("motions/01_01.bvh"), &[], &body.skeleton, None).unwrap();
+    let max = load_clip(&sample("motions/131_02.bvh"), &[], &body.skeleton, None).unwrap();
+    assert_eq!(mb.map_name, "cmu_mb");
+    assert_eq!(max.map_name, "cmu_3dsmax");
+    assert_eq!(
+        max.animation.fps, 120.0,
+        "CMU's .0083333 s frame time is 120 Hz"
+    );
+    // CMU units are about 0.0548 m judged by leg length; our hip-height scale lands near it.
+    assert!((0.045..0.065).contains(&max.scale), "{}", max.scale);
+}
