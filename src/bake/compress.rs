@@ -1,0 +1,145 @@
+//! Compressing a pose-space-deformation basis into fewer blend shapes.
+//!
+//! The network adds `O_f = Σ_k X_fk D_k` to the rest mesh at frame f. Over the baked clips these
+//! offsets span far fewer than K directions, so we keep the leading singular vectors of the
+//! stacked offsets `O = X D` (frames × 3N). `D` is tall (3N × K after transposing), so the SVD is
+//! taken of the small `X Rᵀ` where `Dᵀ = Q R` (thin QR): `O = U Σ (Q V)ᵀ`.
+
+use nalgebra::DMatrix;
+
+/// The network's basis and its coefficients over the frames to bake.
+pub struct UsedOffsets<'a> {
+    /// K components, each N offsets.
+    pub basis: &'a [Vec<[f32; 3]>],
+    /// Coefficients per frame (all clips stacked), K each.
+    pub coefficients: &'a [Vec<f32>],
+}
+
+/// A blend-shape set and its per-frame weights reproducing the used offsets.
+#[derive(Clone, Debug)]
+pub struct Compressed {
+    pub targets: Vec<Vec<[f32; 3]>>,
+    /// Weights per frame (same order as the input coefficients).
+    pub weights: Vec<Vec<f32>>,
+    /// Largest vertex offset error (m) over all frames, before skinning (skinning by a convex
+    /// blend of rotations never enlarges it).
+    pub max_error: f32,
+    pub mean_error: f32,
+}
+
+/// Singular directions of the used offsets, strongest first, with the frame coefficients.
+pub struct Spectrum {
+    directions: DMatrix<f64>,
+    coefficients: DMatrix<f64>,
+    pub singular_values: Vec<f64>,
+}
+
+pub fn spectrum(used: &UsedOffsets) -> Spectrum {
+    let k = used.basis.len();
+    let n3 = used.basis.first().map_or(0, |b| b.len() * 3);
+    let dt = DMatrix::from_fn(n3, k, |r, c| used.basis[c][r / 3][r % 3] as f64);
+    let qr = dt.qr();
+    let (q, r) = (qr.q(), qr.r());
+    let x = DMatrix::from_fn(used.coefficients.len(), k, |f, c| used.coefficients[f][c] as f64);
+    let svd = (x * r.transpose()).svd(true, true);
+    let (u, v_t) = (svd.u.expect("U requested"), svd.v_t.expect("V requested"));
+    // Sort by singular value (nalgebra does not promise an order).
+    let mut order: Vec<usize> = (0..svd.singular_values.len()).collect();
+    order.sort_by(|&a, &b| svd.singular_values[b].total_cmp(&svd.singular_values[a]));
+    let sv: Vec<f64> = order.iter().map(|&i| svd.singular_values[i]).collect();
+    let directions = DMatrix::from_fn(n3, order.len(), |row, c| (q.row(row) * v_t.row(order[c]).transpose())[0]);
+    let coefficients = DMatrix::from_fn(u.nrows(), order.len(), |f, c| u[(f, order[c])] * sv[c]);
+    Spectrum { directions, coefficients, singular_values: sv }
+}
+
+impl Spectrum {
+    pub fn rank(&self) -> usize {
+        self.singular_values.len()
+    }
+
+    /// Keeps the `count` strongest directions; errors measured against the full used offsets.
+    pub fn truncate(&self, used: &UsedOffsets, count: usize) -> Compressed {
+        let count = count.min(self.rank());
+        let n = self.directions.nrows() / 3;
+        let targets = (0..count)
+            .map(|c| (0..n).map(|v| [0, 1, 2].map(|a| self.directions[(3 * v + a, c)] as f32)).collect())
+            .collect::<Vec<Vec<[f32; 3]>>>();
+        let weights: Vec<Vec<f32>> =
+            (0..self.coefficients.nrows()).map(|f| (0..count).map(|c| self.coefficients[(f, c)] as f32).collect()).collect();
+        let (max_error, mean_error) = errors(used, &targets, &weights);
+        Compressed { targets, weights, max_error, mean_error }
+    }
+
+    /// The smallest count whose max error is within `tolerance` (m); the full rank otherwise.
+    pub fn within(&self, used: &UsedOffsets, tolerance: f32) -> Compressed {
+        let mut lo = 0;
+        let mut hi = self.rank();
+        // Error falls as targets are added; bisect on the count.
+        while lo < hi {
+            let mid = (lo + hi) / 2;
+            if self.truncate(used, mid).max_error <= tolerance {
+                hi = mid;
+            } else {
+                lo = mid + 1;
+            }
+        }
+        self.truncate(used, lo)
+    }
+}
+
+/// Max and mean per-vertex distance between the network's offsets and the compressed ones.
+fn errors(used: &UsedOffsets, targets: &[Vec<[f32; 3]>], weights: &[Vec<f32>]) -> (f32, f32) {
+    let n = used.basis.first().map_or(0, Vec::len);
+    let (mut max, mut sum, mut count) = (0.0f64, 0.0f64, 0usize);
+    for (x, w) in used.coefficients.iter().zip(weights) {
+        for v in 0..n {
+            let mut d = [0.0f64; 3];
+            for (k, basis) in used.basis.iter().enumerate() {
+                for a in 0..3 {
+                    d[a] += x[k] as f64 * basis[v][a] as f64;
+                }
+            }
+            for (t, target) in targets.iter().enumerate() {
+                for a in 0..3 {
+                    d[a] -= w[t] as f64 * target[v][a] as f64;
+                }
+            }
+            let e = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            max = max.max(e);
+            sum += e;
+            count += 1;
+        }
+    }
+    (max as f32, (sum / count.max(1) as f64) as f32)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A rank-2 set of offsets hidden in a 5-component basis.
+    fn fixture() -> (Vec<Vec<[f32; 3]>>, Vec<Vec<f32>>) {
+        let n = 40;
+        let a: Vec<[f32; 3]> = (0..n).map(|v| [v as f32 * 0.001, 0.0, 0.002]).collect();
+        let b: Vec<[f32; 3]> = (0..n).map(|v| [0.0, (v as f32 * 0.3).sin() * 0.01, 0.0]).collect();
+        // Components: a, b, a+b, 2a-b, a-b (rank 2).
+        let mix = |p: f32, q: f32| a.iter().zip(&b).map(|(x, y)| [0, 1, 2].map(|i| p * x[i] + q * y[i])).collect::<Vec<_>>();
+        let basis = vec![mix(1.0, 0.0), mix(0.0, 1.0), mix(1.0, 1.0), mix(2.0, -1.0), mix(1.0, -1.0)];
+        let coefficients = (0..30).map(|f| (0..5).map(|k| ((f * 7 + k * 3) % 11) as f32 / 11.0 - 0.5).collect()).collect();
+        (basis, coefficients)
+    }
+
+    #[test]
+    fn finds_the_true_rank_and_reproduces_offsets_exactly() {
+        let (basis, coefficients) = fixture();
+        let used = UsedOffsets { basis: &basis, coefficients: &coefficients };
+        let s = spectrum(&used);
+        assert!(s.singular_values[2] < 1e-9 * s.singular_values[0], "{:?}", s.singular_values);
+        let two = s.truncate(&used, 2);
+        assert!(two.max_error < 1e-6, "{}", two.max_error);
+        let one = s.truncate(&used, 1);
+        assert!(one.max_error > 1e-4, "one direction cannot explain a rank-2 set");
+        let picked = s.within(&used, 1e-6);
+        assert_eq!(picked.targets.len(), 2);
+    }
+}
