@@ -11,10 +11,10 @@ fn lowest_vertex(
     anim: &garmentbake::rig::SkelAnimation,
     joints: &[usize],
 ) -> Vec<f32> {
-    let region: Vec<usize> = (0..body.mesh.vertex_count())
+    let region: Vec<u32> = (0..body.mesh.vertex_count() as u32)
         .filter(|&v| {
             body.skin
-                .vertex(v)
+                .vertex(v as usize)
                 .max_by(|a, b| a.1.total_cmp(&b.1))
                 .is_some_and(|(j, _)| joints.contains(&j))
         })
@@ -22,26 +22,11 @@ fn lowest_vertex(
     (0..anim.frame_count())
         .map(|f| {
             let skinning = body.skeleton.skinning_matrices(&anim.local_pose(f));
-            let pts: Vec<[f32; 3]> = region.iter().map(|&v| body.mesh.positions[v]).collect();
-            let sub = garmentbake::rig::Skin {
-                influences: body.skin.influences,
-                joint_indices: region
-                    .iter()
-                    .flat_map(|&v| {
-                        body.skin.joint_indices
-                            [v * body.skin.influences..(v + 1) * body.skin.influences]
-                            .to_vec()
-                    })
-                    .collect(),
-                joint_weights: region
-                    .iter()
-                    .flat_map(|&v| {
-                        body.skin.joint_weights
-                            [v * body.skin.influences..(v + 1) * body.skin.influences]
-                            .to_vec()
-                    })
-                    .collect(),
-            };
+            let pts: Vec<[f32; 3]> = region
+                .iter()
+                .map(|&v| body.mesh.positions[v as usize])
+                .collect();
+            let sub = body.skin.select(&region);
             sub.skin_points(&pts, &skinning)
                 .iter()
                 .map(|p| p[1])

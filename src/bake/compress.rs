@@ -40,16 +40,24 @@ pub fn spectrum(used: &UsedOffsets) -> Spectrum {
     let dt = DMatrix::from_fn(n3, k, |r, c| used.basis[c][r / 3][r % 3] as f64);
     let qr = dt.qr();
     let (q, r) = (qr.q(), qr.r());
-    let x = DMatrix::from_fn(used.coefficients.len(), k, |f, c| used.coefficients[f][c] as f64);
+    let x = DMatrix::from_fn(used.coefficients.len(), k, |f, c| {
+        used.coefficients[f][c] as f64
+    });
     let svd = (x * r.transpose()).svd(true, true);
     let (u, v_t) = (svd.u.expect("U requested"), svd.v_t.expect("V requested"));
     // Sort by singular value (nalgebra does not promise an order).
     let mut order: Vec<usize> = (0..svd.singular_values.len()).collect();
     order.sort_by(|&a, &b| svd.singular_values[b].total_cmp(&svd.singular_values[a]));
     let sv: Vec<f64> = order.iter().map(|&i| svd.singular_values[i]).collect();
-    let directions = DMatrix::from_fn(n3, order.len(), |row, c| (q.row(row) * v_t.row(order[c]).transpose())[0]);
+    let directions = DMatrix::from_fn(n3, order.len(), |row, c| {
+        (q.row(row) * v_t.row(order[c]).transpose())[0]
+    });
     let coefficients = DMatrix::from_fn(u.nrows(), order.len(), |f, c| u[(f, order[c])] * sv[c]);
-    Spectrum { directions, coefficients, singular_values: sv }
+    Spectrum {
+        directions,
+        coefficients,
+        singular_values: sv,
+    }
 }
 
 impl Spectrum {
@@ -62,12 +70,26 @@ impl Spectrum {
         let count = count.min(self.rank());
         let n = self.directions.nrows() / 3;
         let targets = (0..count)
-            .map(|c| (0..n).map(|v| [0, 1, 2].map(|a| self.directions[(3 * v + a, c)] as f32)).collect())
+            .map(|c| {
+                (0..n)
+                    .map(|v| [0, 1, 2].map(|a| self.directions[(3 * v + a, c)] as f32))
+                    .collect()
+            })
             .collect::<Vec<Vec<[f32; 3]>>>();
-        let weights: Vec<Vec<f32>> =
-            (0..self.coefficients.nrows()).map(|f| (0..count).map(|c| self.coefficients[(f, c)] as f32).collect()).collect();
+        let weights: Vec<Vec<f32>> = (0..self.coefficients.nrows())
+            .map(|f| {
+                (0..count)
+                    .map(|c| self.coefficients[(f, c)] as f32)
+                    .collect()
+            })
+            .collect();
         let (max_error, mean_error) = errors(used, &targets, &weights);
-        Compressed { targets, weights, max_error, mean_error }
+        Compressed {
+            targets,
+            weights,
+            max_error,
+            mean_error,
+        }
     }
 
     /// The smallest count whose max error is within `tolerance` (m); the full rank otherwise.
@@ -121,24 +143,53 @@ mod tests {
     fn fixture() -> (Vec<Vec<[f32; 3]>>, Vec<Vec<f32>>) {
         let n = 40;
         let a: Vec<[f32; 3]> = (0..n).map(|v| [v as f32 * 0.001, 0.0, 0.002]).collect();
-        let b: Vec<[f32; 3]> = (0..n).map(|v| [0.0, (v as f32 * 0.3).sin() * 0.01, 0.0]).collect();
+        let b: Vec<[f32; 3]> = (0..n)
+            .map(|v| [0.0, (v as f32 * 0.3).sin() * 0.01, 0.0])
+            .collect();
         // Components: a, b, a+b, 2a-b, a-b (rank 2).
-        let mix = |p: f32, q: f32| a.iter().zip(&b).map(|(x, y)| [0, 1, 2].map(|i| p * x[i] + q * y[i])).collect::<Vec<_>>();
-        let basis = vec![mix(1.0, 0.0), mix(0.0, 1.0), mix(1.0, 1.0), mix(2.0, -1.0), mix(1.0, -1.0)];
-        let coefficients = (0..30).map(|f| (0..5).map(|k| ((f * 7 + k * 3) % 11) as f32 / 11.0 - 0.5).collect()).collect();
+        let mix = |p: f32, q: f32| {
+            a.iter()
+                .zip(&b)
+                .map(|(x, y)| [0, 1, 2].map(|i| p * x[i] + q * y[i]))
+                .collect::<Vec<_>>()
+        };
+        let basis = vec![
+            mix(1.0, 0.0),
+            mix(0.0, 1.0),
+            mix(1.0, 1.0),
+            mix(2.0, -1.0),
+            mix(1.0, -1.0),
+        ];
+        let coefficients = (0..30)
+            .map(|f| {
+                (0..5)
+                    .map(|k| ((f * 7 + k * 3) % 11) as f32 / 11.0 - 0.5)
+                    .collect()
+            })
+            .collect();
         (basis, coefficients)
     }
 
     #[test]
     fn finds_the_true_rank_and_reproduces_offsets_exactly() {
         let (basis, coefficients) = fixture();
-        let used = UsedOffsets { basis: &basis, coefficients: &coefficients };
+        let used = UsedOffsets {
+            basis: &basis,
+            coefficients: &coefficients,
+        };
         let s = spectrum(&used);
-        assert!(s.singular_values[2] < 1e-9 * s.singular_values[0], "{:?}", s.singular_values);
+        assert!(
+            s.singular_values[2] < 1e-9 * s.singular_values[0],
+            "{:?}",
+            s.singular_values
+        );
         let two = s.truncate(&used, 2);
         assert!(two.max_error < 1e-6, "{}", two.max_error);
         let one = s.truncate(&used, 1);
-        assert!(one.max_error > 1e-4, "one direction cannot explain a rank-2 set");
+        assert!(
+            one.max_error > 1e-4,
+            "one direction cannot explain a rank-2 set"
+        );
         let picked = s.within(&used, 1e-6);
         assert_eq!(picked.targets.len(), 2);
     }

@@ -83,23 +83,7 @@ pub fn skinned_mesh_asset(
             .map(|&s| v[s as usize])
             .collect::<Vec<_>>()
     };
-    let influences = skin.influences;
-    let joint_indices = source_vertex
-        .iter()
-        .flat_map(|&s| {
-            skin.joint_indices[s as usize * influences..(s as usize + 1) * influences]
-                .iter()
-                .copied()
-        })
-        .collect();
-    let joint_weights = source_vertex
-        .iter()
-        .flat_map(|&s| {
-            skin.joint_weights[s as usize * influences..(s as usize + 1) * influences]
-                .iter()
-                .copied()
-        })
-        .collect();
+    let skin = skin.select(&source_vertex);
     asset::Mesh {
         name: name.to_string(),
         points: pick(&mesh.positions),
@@ -107,9 +91,9 @@ pub fn skinned_mesh_asset(
         uvs,
         triangles,
         skin: Some(asset::SkinBinding {
-            influences,
-            joint_indices,
-            joint_weights,
+            influences: skin.influences,
+            joint_indices: skin.joint_indices,
+            joint_weights: skin.joint_weights,
         }),
         blend_shapes: Vec::new(),
         source_vertex,

@@ -56,6 +56,23 @@ impl Skin {
             .map(|(&j, &w)| (j as usize, w))
     }
 
+    /// The skin of the given vertices, in that order (subsets, seam duplicates).
+    pub fn select(&self, vertices: &[u32]) -> Skin {
+        let k = self.influences;
+        let range = |v: u32| v as usize * k..(v as usize + 1) * k;
+        Skin {
+            influences: k,
+            joint_indices: vertices
+                .iter()
+                .flat_map(|&v| self.joint_indices[range(v)].iter().copied())
+                .collect(),
+            joint_weights: vertices
+                .iter()
+                .flat_map(|&v| self.joint_weights[range(v)].iter().copied())
+                .collect(),
+        }
+    }
+
     /// Linear blend skinning: `Σ w_j M_j p` for every rest point.
     pub fn skin_points(&self, rest: &[[f32; 3]], skinning: &[Matrix4<f32>]) -> Vec<[f32; 3]> {
         rest.iter()
