@@ -7,11 +7,12 @@ usage (the project venv's python: .venv/bin/python):
   check.py info FILE
       stage metadata, prims with their types and applied schemas, the `clip` variant set, skinned
       meshes (influences, blend shapes, sparse indices), animations (time samples, channels).
-  check.py replay FILE --mesh NAME [--clip VARIANT] [--method query|bake] --reference REF.f32
+  check.py replay FILE --mesh NAME [--clip VARIANT] [--method query|bake] [--stride K]
+                 --reference REF.f32
       positions of the skinned mesh NAME (a prim name under the default prim) at every time sample
       of the bound SkelAnimation, computed by UsdSkel -- the code path USD viewers use -- and
-      compared with REF.f32 (raw little-endian float32, frames x points x 3). Prints JSON
-      {frames, points, max_mm, per_frame_max_mm}.
+      compared with REF.f32 (raw little-endian float32, frames x points x 3; with --stride K it
+      holds every K-th frame). Prints JSON {frames, compared_frames, points, max_mm, per_frame_max_mm}.
         query: UsdSkel.Cache -> SkinningQuery, BlendShapeQuery (blend shapes applied to the rest
                points, then ComputeSkinnedPoints with the skeleton's skinning transforms).
         bake:  UsdSkel.BakeSkinning on an in-memory copy, then reads the baked `points` samples.
@@ -197,7 +198,7 @@ def _skinned_by_bake(stage, mesh_path):
     return times, np.stack([np.asarray(attr.Get(t), dtype=np.float64) for t in times])
 
 
-def replay(path, mesh, clip, method, reference):
+def replay(path, mesh, clip, method, reference, stride):
     stage = Usd.Stage.Open(path)
     _select_clip(stage, clip)
     mesh_path = stage.GetDefaultPrim().GetPath().AppendChild(mesh)
@@ -209,10 +210,12 @@ def replay(path, mesh, clip, method, reference):
     else:
         times, frames = _skinned_by_query(stage, mesh_prim)
     ref = _reference(reference, frames.shape[1])
+    frames = frames[::stride]
     count = min(len(ref), len(frames))
     err = np.linalg.norm(frames[:count] - ref[:count], axis=2).max(axis=1) * 1e3
-    print(json.dumps({"file": path, "method": method, "frames": len(frames),
-                      "reference_frames": len(ref), "points": frames.shape[1],
+    print(json.dumps({"file": path, "method": method, "frames": len(times),
+                      "compared_frames": count, "reference_frames": len(ref),
+                      "points": frames.shape[1],
                       "first_time": times[0], "last_time": times[-1],
                       "max_mm": float(err.max()), "per_frame_max_mm": [float(e) for e in err]}))
     return 0
@@ -248,6 +251,7 @@ def main():
     r.add_argument("--clip")
     r.add_argument("--method", choices=["query", "bake"], default="query")
     r.add_argument("--reference", required=True)
+    r.add_argument("--stride", type=int, default=1)
     p = sub.add_parser("points")
     p.add_argument("file")
     p.add_argument("--reference", required=True)
@@ -257,7 +261,7 @@ def main():
     if a.cmd == "info":
         return info(a.file)
     if a.cmd == "replay":
-        return replay(a.file, a.mesh, a.clip, a.method, a.reference)
+        return replay(a.file, a.mesh, a.clip, a.method, a.reference, a.stride)
     return points(a.file, a.reference)
 
 
