@@ -388,8 +388,8 @@ fn skirt_reference(s: &SkirtAsset, c: usize, f: usize) -> Vec<[f32; 3]> {
         .map(|v| {
             let mut p = mesh.points[v];
             for (shape, &wk) in mesh.blend_shapes.iter().zip(w) {
-                for c in 0..3 {
-                    p[c] += wk * shape.offsets[v][c];
+                for (pc, dc) in p.iter_mut().zip(shape.offsets[v]) {
+                    *pc += wk * dc;
                 }
             }
             p

@@ -163,7 +163,7 @@ impl BakedAsset {
                     anim.name, anim.frame_count
                 ));
             }
-            if anim.frame_count < 2 || !(anim.fps > 0.0) {
+            if anim.frame_count < 2 || !positive_rate(anim.fps) {
                 return Err(format!(
                     "animation '{}': needs at least 2 frames and a positive rate",
                     anim.name
@@ -225,14 +225,14 @@ impl PointCache {
 
     pub fn check(&self) -> Result<(), String> {
         let n = self.point_count;
-        if n == 0 || self.points.is_empty() || self.points.len() % n != 0 {
+        if n == 0 || self.points.is_empty() || !self.points.len().is_multiple_of(n) {
             return Err(format!(
                 "point cache '{}': {} points are not whole frames of {n} points",
                 self.name,
                 self.points.len()
             ));
         }
-        if !(self.fps > 0.0) {
+        if !positive_rate(self.fps) {
             return Err(format!(
                 "point cache '{}': the rate must be positive",
                 self.name
@@ -265,4 +265,9 @@ pub fn extent(points: &[[f32; 3]]) -> [[f32; 3]; 2] {
         }
     }
     [lo, hi]
+}
+
+/// A usable frame rate: finite and above zero (NaN is refused too).
+fn positive_rate(fps: f32) -> bool {
+    fps.is_finite() && fps > 0.0
 }
