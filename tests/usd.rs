@@ -613,3 +613,76 @@ fn slow_bench_usd_writer() {
         );
     }
 }
+
+/// Blender's own USD importer (PyPI `bpy` 4.5 LTS in target/bpy-venv: `bash scripts/setup_bpy.sh`,
+/// a 373 MB wheel, hence opt-in): `cargo test --test usd -- --ignored slow_blender --nocapture`.
+#[test]
+#[ignore]
+fn slow_blender_imports_the_usdc_with_armature_shape_keys_and_animation() {
+    let python = root().join("target/bpy-venv/bin/python");
+    assert!(
+        python.exists(),
+        "Blender's bpy is not installed; run `bash scripts/setup_bpy.sh`"
+    );
+    let dir = out_dir("usd_blender");
+    let s = skirt_asset(40, 2, 30.0);
+    let file = dir.join("skirt.usdc");
+    exporters::write(&s.asset, &file).unwrap();
+    let frames = [0usize, 17, 39];
+    let json = dir.join("blender.json");
+    let out = std::process::Command::new(&python)
+        .arg(root().join("tools/blender/eval_usd.py"))
+        .arg(&file)
+        .args(["--frames", "0,17,39", "--out"])
+        .arg(&json)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "eval_usd failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    eprintln!("Blender {}", r["blender_version"]);
+    let armature = &r["armatures"][0];
+    assert_eq!(armature["bone_count"], 31, "{armature}");
+    assert_eq!(armature["animated"], true, "{armature}");
+    let meshes = r["meshes"].as_array().unwrap();
+    let mesh = |name: &str| {
+        meshes
+            .iter()
+            .find(|m| m["name"] == name)
+            .unwrap_or_else(|| panic!("no mesh {name} in {meshes:?}"))
+    };
+    let skirt = mesh("skirt");
+    assert_eq!(
+        skirt["shape_keys"],
+        serde_json::json!(["Basis", "flare", "hem_lift"])
+    );
+    assert_eq!(skirt["shape_keys_animated"], true);
+    assert_eq!(skirt["armature_modifier"], true);
+    for (i, &f) in frames.iter().enumerate() {
+        let blender = flat_positions(&skirt["frames"][i]["positions"]);
+        let err = max_distance(&blender, &skirt_reference(&s, 0, f));
+        eprintln!(
+            "Blender vs our LBS(T + Σ w D), skirt frame {f}: max {:.4} mm",
+            err * 1e3
+        );
+        assert!(err < 1e-3, "skirt frame {f}: {:.3} mm", err * 1e3);
+        let blender = flat_positions(&mesh("body")["frames"][i]["positions"]);
+        let ours = our_lbs(
+            &s.body,
+            &s.body.skin,
+            &s.body.mesh.positions,
+            &s.clips[0],
+            f,
+        );
+        let err = max_distance(&blender, &ours);
+        eprintln!(
+            "Blender vs our LBS, body frame {f}: max {:.4} mm",
+            err * 1e3
+        );
+        assert!(err < 1e-3, "body frame {f}: {:.3} mm", err * 1e3);
+    }
+}
