@@ -132,18 +132,19 @@ def _skinned_mesh(stage, path, m, skel_path):
         mesh.CreateNormalsAttr(Vt.Vec3fArray.FromBuffer(m["normals"]))
         mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
     _mesh_topology(mesh, m)
+    skin, shapes = m.get("skin"), m["blend_shapes"]
+    if skin is None and not shapes:
+        return  # a static mesh (e.g. a prop): nothing for UsdSkel to deform
 
     binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
     binding.CreateSkeletonRel().SetTargets([skel_path])
     # Points are authored in skeleton space at bind time: the identity is the truth, written out
     # so no reader has to guess.
     binding.CreateGeomBindTransformAttr(Gf.Matrix4d(1.0))
-    skin = m.get("skin")
     if skin is not None:
         k = skin["influences"]
         binding.CreateJointIndicesPrimvar(False, k).Set(Vt.IntArray.FromBuffer(skin["indices"]))
         binding.CreateJointWeightsPrimvar(False, k).Set(Vt.FloatArray.FromBuffer(skin["weights"]))
-    shapes = m["blend_shapes"]
     if shapes:
         targets = []
         for s in shapes:
