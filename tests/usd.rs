@@ -537,6 +537,38 @@ fn missing_usd_core_is_one_clear_error_and_no_file() {
 }
 
 #[test]
+fn bad_outputs_are_refused_with_one_line() {
+    let dir = out_dir("usd_bad_out");
+    let pose_to = |out: &Path| {
+        garmentbake(&[
+            "pose",
+            "--body",
+            sample("body.glb").to_str().unwrap(),
+            "--motion",
+            sample("motions/131_02.bvh").to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+    };
+    // usd-core would create the folder; we refuse like the glTF writer does.
+    let missing = dir.join("no-such-folder/walk.usdc");
+    let out = pose_to(&missing);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("no folder"), "{stderr}");
+    assert!(!missing.parent().unwrap().exists());
+    // A failure inside usd-core (a folder in the way of the file): one line with its reason.
+    let blocked = dir.join("blocked.usdc");
+    std::fs::create_dir_all(blocked.with_file_name(".blocked.partial.usdc")).unwrap();
+    let out = pose_to(&blocked);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
+    assert!(stderr.contains("usd-core"), "{stderr}");
+    assert!(!blocked.exists());
+}
+
+#[test]
 fn unknown_output_extension_is_refused() {
     let dir = out_dir("usd_bad_ext");
     let out = garmentbake(&[

@@ -60,6 +60,20 @@ pub fn replace_via<E: From<std::io::Error>>(
     path: &Path,
     fill: impl FnOnce(&Path) -> Result<(), E>,
 ) -> Result<(), E> {
+    // Some writers (usd-core) create missing folders; refuse like every other output does.
+    if let Some(dir) = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty() && !d.is_dir())
+    {
+        return Err(E::from(std::io::Error::new(
+            std::io::ErrorKind::NotFound,
+            format!(
+                "cannot write {}: no folder {}",
+                path.display(),
+                dir.display()
+            ),
+        )));
+    }
     let tmp = temp_path_keeping_extension(path);
     let result = fill(&tmp).and_then(|()| {
         std::fs::rename(&tmp, path).map_err(|e| {

@@ -8,10 +8,11 @@ USD schemas. Arrays arrive as flat memoryviews cast to 'f' / 'i' / 'd' and go in
 """
 
 import os
+import re
 import shutil
 import tempfile
 
-from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, UsdUtils, Vt
+from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdSkel, UsdUtils, Vt
 
 
 def _chunk(mv, i, n):
@@ -55,7 +56,16 @@ def _mesh_topology(mesh, m):
 
 def _export(stage, path):
     """Writes the root layer to `path`; the format follows the extension (.usda, .usdc, .usdz)."""
-    layer = stage.GetRootLayer()
+    try:
+        _export_layer(stage.GetRootLayer(), path)
+    except Tf.ErrorException as e:
+        # Tf reports every error with its C++ function, file and line; the user needs the reasons.
+        chunks = re.split(r"\s*Error in ", str(e))
+        reasons = [c.split(" : ", 1)[1].strip().strip("'") for c in chunks if " : " in c]
+        raise RuntimeError("usd-core: " + "; ".join(reasons or [str(e)])) from None
+
+
+def _export_layer(layer, path):
     if not path.endswith(".usdz"):
         if not layer.Export(path):
             raise RuntimeError("usd-core could not write " + path)
