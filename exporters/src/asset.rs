@@ -84,3 +84,190 @@ pub struct BakedAsset {
     /// Free-form provenance written into the file's metadata (generator, model, clips).
     pub provenance: Vec<(String, String)>,
 }
+
+impl BakedAsset {
+    /// Structural checks the formats cannot express: sizes that must agree. Every writer runs
+    /// them first so a bad asset is refused with a reason instead of producing a broken file.
+    pub fn check(&self) -> Result<(), String> {
+        let sk = &self.skeleton;
+        let joints = sk.joint_count();
+        if sk.parents.len() != joints
+            || sk.rest_translations.len() != joints
+            || sk.rest_rotations.len() != joints
+            || sk.inverse_bind_matrices.len() != joints
+        {
+            return Err(format!(
+                "skeleton: per-joint arrays do not match {joints} joints"
+            ));
+        }
+        if let Some((j, _)) = sk
+            .parents
+            .iter()
+            .enumerate()
+            .find(|(j, p)| p.is_some_and(|p| p >= *j))
+        {
+            return Err(format!(
+                "skeleton: joint '{}' comes before its parent",
+                sk.joint_names[j]
+            ));
+        }
+        for mesh in &self.meshes {
+            let n = mesh.points.len();
+            if let Some(skin) = &mesh.skin {
+                if skin.influences == 0
+                    || skin.joint_indices.len() != n * skin.influences
+                    || skin.joint_weights.len() != n * skin.influences
+                {
+                    return Err(format!(
+                        "mesh '{}': skin arrays do not match {n} vertices",
+                        mesh.name
+                    ));
+                }
+                if let Some(j) = skin.joint_indices.iter().find(|&&j| j as usize >= joints) {
+                    return Err(format!(
+                        "mesh '{}': joint index {j} but the skeleton has {joints} joints",
+                        mesh.name
+                    ));
+                }
+            }
+            if let Some(t) = mesh.triangles.iter().flatten().find(|&&i| i as usize >= n) {
+                return Err(format!(
+                    "mesh '{}': triangle index {t} out of range ({n} vertices)",
+                    mesh.name
+                ));
+            }
+            let per_vertex = |len: Option<usize>| len.is_none_or(|l| l == n);
+            if !per_vertex(mesh.normals.as_ref().map(Vec::len))
+                || !per_vertex(mesh.uvs.as_ref().map(Vec::len))
+            {
+                return Err(format!(
+                    "mesh '{}': normals or UVs do not match {n} vertices",
+                    mesh.name
+                ));
+            }
+            if mesh.blend_shapes.iter().any(|b| {
+                b.offsets.len() != n || !per_vertex(b.normal_offsets.as_ref().map(Vec::len))
+            }) {
+                return Err(format!(
+                    "mesh '{}': a blend shape does not have {n} offsets",
+                    mesh.name
+                ));
+            }
+        }
+        for anim in &self.animations {
+            if anim.rotations.len() != anim.frame_count * joints
+                || anim.translations.len() != anim.frame_count * joints
+            {
+                return Err(format!(
+                    "animation '{}': joint samples do not match {} frames",
+                    anim.name, anim.frame_count
+                ));
+            }
+            if anim.frame_count < 2 || !positive_rate(anim.fps) {
+                return Err(format!(
+                    "animation '{}': needs at least 2 frames and a positive rate",
+                    anim.name
+                ));
+            }
+            for (m, weights) in &anim.blend_shape_weights {
+                let Some(mesh) = self.meshes.get(*m) else {
+                    return Err(format!(
+                        "animation '{}': blend-shape weights for mesh {m}, which does not exist",
+                        anim.name
+                    ));
+                };
+                if weights.len() != anim.frame_count * mesh.blend_shapes.len() {
+                    return Err(format!(
+                        "animation '{}': blend-shape weights of mesh '{}' do not match {} frames x {} shapes",
+                        anim.name,
+                        mesh.name,
+                        anim.frame_count,
+                        mesh.blend_shapes.len()
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Renormalised in f64 then rounded to f32, so validators (and skinning, which assumes unit
+/// quaternions) see unit length.
+pub fn unit_quat(q: [f32; 4]) -> [f32; 4] {
+    let n = q.iter().map(|c| (*c as f64).powi(2)).sum::<f64>().sqrt();
+    q.map(|c| (c as f64 / n) as f32)
+}
+
+/// A per-frame point cache: the same topology at every frame, only the points move (the baked
+/// form of motion-driven garments whose skinning changes every frame). Format-neutral: the USD
+/// writer makes time-sampled `points`, the PC2/MDD writers their own frames.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PointCache {
+    pub name: String,
+    pub fps: f32,
+    pub triangles: Vec<[u32; 3]>,
+    /// One UV per point, when the mesh has them.
+    pub uvs: Option<Vec<[f32; 2]>>,
+    pub point_count: usize,
+    /// Frame-major: `points[frame * point_count + vertex]` (one flat buffer, so a writer hands
+    /// whole frames to its format without copying vertex by vertex).
+    pub points: Vec<[f32; 3]>,
+}
+
+impl PointCache {
+    pub fn frame_count(&self) -> usize {
+        self.points.len().checked_div(self.point_count).unwrap_or(0)
+    }
+
+    pub fn frame(&self, f: usize) -> &[[f32; 3]] {
+        &self.points[f * self.point_count..(f + 1) * self.point_count]
+    }
+
+    pub fn check(&self) -> Result<(), String> {
+        let n = self.point_count;
+        if n == 0 || self.points.is_empty() || !self.points.len().is_multiple_of(n) {
+            return Err(format!(
+                "point cache '{}': {} points are not whole frames of {n} points",
+                self.name,
+                self.points.len()
+            ));
+        }
+        if !positive_rate(self.fps) {
+            return Err(format!(
+                "point cache '{}': the rate must be positive",
+                self.name
+            ));
+        }
+        if let Some(t) = self.triangles.iter().flatten().find(|&&i| i as usize >= n) {
+            return Err(format!(
+                "point cache '{}': triangle index {t} out of range ({n} points)",
+                self.name
+            ));
+        }
+        if self.uvs.as_ref().is_some_and(|uv| uv.len() != n) {
+            return Err(format!(
+                "point cache '{}': UVs do not match {n} points",
+                self.name
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Axis-aligned bounds `[min, max]` of points (USD `extent`).
+pub fn extent(points: &[[f32; 3]]) -> [[f32; 3]; 2] {
+    let mut lo = [f32::INFINITY; 3];
+    let mut hi = [f32::NEG_INFINITY; 3];
+    for p in points {
+        for c in 0..3 {
+            lo[c] = lo[c].min(p[c]);
+            hi[c] = hi[c].max(p[c]);
+        }
+    }
+    [lo, hi]
+}
+
+/// A usable frame rate: finite and above zero (NaN is refused too).
+fn positive_rate(fps: f32) -> bool {
+    fps.is_finite() && fps > 0.0
+}

@@ -40,3 +40,51 @@ pub fn write_atomic_with(
     }
     Ok(())
 }
+
+/// Temporary sibling of `path` that keeps its extension (`skirt.usdc` → `.skirt.partial.usdc`),
+/// for writers such as usd-core that choose the file format from the extension.
+pub fn temp_path_keeping_extension(path: &Path) -> PathBuf {
+    let stem = path
+        .file_stem()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    match path.extension() {
+        Some(ext) => path.with_file_name(format!(".{stem}.partial.{}", ext.to_string_lossy())),
+        None => path.with_file_name(format!(".{stem}.partial")),
+    }
+}
+
+/// Lets `fill` write the whole file at `tmp` (a [`temp_path_keeping_extension`] of `path`), then
+/// renames it over `path`; on any failure the temporary file is removed and `path` is untouched.
+pub fn replace_via<E: From<std::io::Error>>(
+    path: &Path,
+    fill: impl FnOnce(&Path) -> Result<(), E>,
+) -> Result<(), E> {
+    // Some writers (usd-core) create missing folders; refuse like every other output does.
+    if let Some(dir) = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty() && !d.is_dir())
+    {
+        return Err(E::from(std::io::Error::new(
+            std::io::ErrorKind::NotFound,
+            format!(
+                "cannot write {}: no folder {}",
+                path.display(),
+                dir.display()
+            ),
+        )));
+    }
+    let tmp = temp_path_keeping_extension(path);
+    let result = fill(&tmp).and_then(|()| {
+        std::fs::rename(&tmp, path).map_err(|e| {
+            E::from(std::io::Error::new(
+                e.kind(),
+                format!("cannot write {}: {e}", path.display()),
+            ))
+        })
+    });
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}

@@ -4,7 +4,7 @@
 //! replays `LBS(T + Σ w_k D_k)` without any runtime of ours. `.glb` packs everything in one file;
 //! `.gltf` writes the JSON next to a `.bin`.
 
-use crate::asset::{BakedAsset, Mesh, SkelAnimation};
+use crate::asset::{unit_quat, BakedAsset, Mesh, SkelAnimation};
 use crate::atomic::write_atomic;
 use gltf_json as json;
 use json::validation::{Checked::Valid, USize64};
@@ -20,7 +20,7 @@ pub enum GltfError {
 
 /// Writes `asset` to `path`; `.glb` → binary container, anything else → `.gltf` + `.bin`.
 pub fn write(asset: &BakedAsset, path: &Path) -> Result<(), GltfError> {
-    check(asset).map_err(|reason| GltfError::Invalid {
+    asset.check().map_err(|reason| GltfError::Invalid {
         path: path.display().to_string(),
         reason,
     })?;
@@ -49,59 +49,6 @@ pub fn write(asset: &BakedAsset, path: &Path) -> Result<(), GltfError> {
 pub fn to_glb(asset: &BakedAsset) -> Vec<u8> {
     let (root, bin) = build(asset, None);
     glb_bytes(&root, &bin)
-}
-
-/// Structural checks the format cannot express: sizes that must agree.
-fn check(asset: &BakedAsset) -> Result<(), String> {
-    let joints = asset.skeleton.joint_count();
-    for mesh in &asset.meshes {
-        let n = mesh.points.len();
-        if let Some(skin) = &mesh.skin {
-            if skin.joint_indices.len() != n * skin.influences
-                || skin.joint_weights.len() != n * skin.influences
-            {
-                return Err(format!(
-                    "mesh '{}': skin arrays do not match {n} vertices",
-                    mesh.name
-                ));
-            }
-            if let Some(j) = skin.joint_indices.iter().find(|&&j| j as usize >= joints) {
-                return Err(format!(
-                    "mesh '{}': joint index {j} but the skeleton has {joints} joints",
-                    mesh.name
-                ));
-            }
-        }
-        if let Some(t) = mesh.triangles.iter().flatten().find(|&&i| i as usize >= n) {
-            return Err(format!(
-                "mesh '{}': triangle index {t} out of range ({n} vertices)",
-                mesh.name
-            ));
-        }
-        if mesh.blend_shapes.iter().any(|b| b.offsets.len() != n) {
-            return Err(format!(
-                "mesh '{}': a blend shape does not have {n} offsets",
-                mesh.name
-            ));
-        }
-    }
-    for anim in &asset.animations {
-        if anim.rotations.len() != anim.frame_count * joints
-            || anim.translations.len() != anim.frame_count * joints
-        {
-            return Err(format!(
-                "animation '{}': joint samples do not match {} frames",
-                anim.name, anim.frame_count
-            ));
-        }
-        if anim.frame_count < 2 || anim.fps <= 0.0 {
-            return Err(format!(
-                "animation '{}': needs at least 2 frames and a positive rate",
-                anim.name
-            ));
-        }
-    }
-    Ok(())
 }
 
 /// Accumulates the binary buffer and the JSON objects that point into it.
@@ -549,12 +496,6 @@ fn add_animation(
         name: Some(anim.name.clone()),
         samplers,
     });
-}
-
-/// Renormalised in f32 so validators see unit quaternions.
-fn unit_quat(q: [f32; 4]) -> [f32; 4] {
-    let n = q.iter().map(|c| (*c as f64).powi(2)).sum::<f64>().sqrt();
-    q.map(|c| (c as f64 / n) as f32)
 }
 
 fn glb_bytes(root: &json::Root, bin: &[u8]) -> Vec<u8> {

@@ -1,4 +1,4 @@
-//! `garmentbake pose`: the body with a retargeted joint animation per clip, as glTF.
+//! `garmentbake pose`: the body with a retargeted joint animation per clip, as glTF or USD.
 
 use crate::bake::{animation_asset, skeleton_asset, skinned_mesh_asset, BODY_COLOR};
 use crate::io::gltf_body::read_body;
@@ -6,11 +6,12 @@ use crate::motion::{load_clip, read_maps};
 use anyhow::{Context, Result};
 use std::path::PathBuf;
 
-/// Pose the body with motion-capture clips and write an animated, skinned glTF.
+/// Pose the body with motion-capture clips and write an animated, skinned glTF or USD.
 ///
 /// Each clip is retargeted onto the body's skeleton: joint names through a map (the two CMU
 /// namings are recognised without --map), T-pose → A-pose rest difference, root translation
-/// scaled by hip height, feet put on the floor. One glTF animation per clip, at the clip's rate.
+/// scaled by hip height, feet put on the floor. One animation per clip, at the clip's rate (USD: a
+/// SkelAnimation per clip, switched by the variant set `clip`).
 #[derive(clap::Args)]
 pub struct Args {
     /// Skinned body (glTF/glb): the mesh, its skin and skeleton.
@@ -25,7 +26,7 @@ pub struct Args {
     /// Keep every n-th frame so the clip plays at this rate (must divide the source rate).
     #[arg(long)]
     fps: Option<f32>,
-    /// Output .glb (binary) or .gltf (+ .bin).
+    /// Output .glb (binary) or .gltf (+ .bin); .usda, .usdc or .usdz (UsdSkel, through usd-core).
     #[arg(long)]
     out: PathBuf,
     /// Print a JSON report instead of text.
@@ -76,7 +77,7 @@ pub fn run(args: Args) -> Result<i32> {
             .push((format!("clip:{}", a.name), path.display().to_string()));
     }
     bar.finish_and_clear();
-    exporters::gltf::write(&asset, &args.out)
+    exporters::write(&asset, &args.out)
         .with_context(|| format!("writing {}", args.out.display()))?;
     if args.json {
         println!(

@@ -125,3 +125,21 @@ pub fn max_distance(a: &[[f32; 3]], b: &[[f32; 3]]) -> f32 {
         })
         .fold(0.0, f32::max)
 }
+
+/// usd-core's own view of a USD file (tools/usd/check.py, run by the project venv's Python):
+/// (exit status 0, the JSON it printed).
+pub fn usd_check(args: &[&str]) -> (bool, serde_json::Value) {
+    let out = Command::new(root().join(".venv/bin/python"))
+        .arg(root().join("tools/usd/check.py"))
+        .args(args)
+        .output()
+        .expect("the project venv is made by scripts/setup.sh");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let json = serde_json::from_str(&stdout).unwrap_or_else(|e| {
+        panic!(
+            "check.py {args:?} printed no JSON ({e}): {stdout}{}",
+            String::from_utf8_lossy(&out.stderr)
+        )
+    });
+    (out.status.success(), json)
+}
