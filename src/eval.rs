@@ -168,3 +168,24 @@ pub fn lbs_frames(
         .map(|p| skin.skin_points(rest, &skeleton.skinning_matrices(p)))
         .collect()
 }
+
+/// Mean metrics of several garment series (e.g. model and plain LBS) over the same poses; the
+/// body is posed one frame at a time so long clips need little memory.
+pub fn compare(
+    geometry: &ClothGeometry,
+    series: &[&[Vec<[f32; 3]>]],
+    body: &Body,
+    poses: &[Vec<JointTransform>],
+) -> Vec<Metrics> {
+    let per_frame: Vec<Vec<Metrics>> = poses
+        .par_iter()
+        .enumerate()
+        .map(|(f, pose)| {
+            let posed = PosedBody::new(body, pose);
+            series.iter().map(|s| geometry.frame(&s[f], &posed)).collect()
+        })
+        .collect();
+    (0..series.len())
+        .map(|k| Metrics::mean(&per_frame.iter().map(|m| m[k]).collect::<Vec<_>>()))
+        .collect()
+}

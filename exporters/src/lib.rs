@@ -7,5 +7,6 @@
 pub mod asset;
 pub mod atomic;
 pub mod gltf;
+pub mod pc2;
 
 pub use asset::BakedAsset;

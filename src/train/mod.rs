@@ -51,6 +51,8 @@ pub struct Settings {
     /// Body vertices farther than this from the garment at rest are never nearest.
     pub reach: f32,
     pub device: Device,
+    /// Learning rate of the skin logits relative to the network's.
+    pub weights_lr_scale: f64,
 }
 
 impl Default for Settings {
@@ -73,6 +75,7 @@ impl Default for Settings {
             refresh_every: 2,
             reach: 0.3,
             device: Device::Cpu,
+            weights_lr_scale: 10.0,
         }
     }
 }
@@ -94,7 +97,8 @@ pub struct PhaseTimes {
     pub nearest: Duration,
     pub losses: Duration,
     pub backward: Duration,
-    /// Candidate refreshes (k-d tree queries + the forward pass they need): part of nearest.
+    /// Candidate upkeep on the training thread (snapshot forward passes, installing lists,
+    /// waiting for a worker, synchronous refreshes): part of nearest neighbour.
     pub refresh: Duration,
     pub steps: usize,
     pub poses: usize,
@@ -130,6 +134,8 @@ pub struct Trainer {
     adam: Adam,
     pinned: Tensor,
     refreshed: bool,
+    /// A candidate refresh running on a worker thread, applied at the next epoch.
+    pending: Option<std::thread::JoinHandle<Vec<i64>>>,
 }
 
 /// Sums of one epoch's step values.
@@ -261,7 +267,12 @@ impl Trainer {
             adam,
             pinned,
             refreshed: false,
+            pending: None,
         })
+    }
+
+    pub fn correspondences(&self) -> &Correspondences {
+        &self.correspondences
     }
 
     pub fn model(&self) -> &Pbns {
@@ -295,16 +306,51 @@ impl Trainer {
         predict(self.model(), &self.train)
     }
 
-    /// New candidate lists if due (every `refresh_every` epochs, and at the first epoch run).
-    fn refresh_if_due(&mut self) {
-        if self.refreshed && self.epoch() % self.settings.refresh_every.max(1) != 0 {
-            return;
-        }
+    /// Candidate upkeep at the start of an epoch. A refresh due at epoch `e` (every
+    /// `refresh_every` epochs) snapshots the model's output now and queries the k-d trees on a
+    /// worker thread while epoch `e` trains; its lists are installed at the start of epoch
+    /// `e + 1`. The first epoch of a run refreshes synchronously. Deterministic: snapshots and
+    /// installs happen at fixed epochs.
+    fn upkeep(&mut self) {
         let t = Instant::now();
+        if let Some(job) = self.pending.take() {
+            let lists = job.join().expect("candidate refresh worker panicked");
+            self.correspondences.apply(lists);
+        }
+        let fresh = !self.refreshed;
+        if fresh {
+            self.refresh();
+        }
+        if !fresh && self.epoch() % self.settings.refresh_every.max(1) == 0 {
+            let x = self.predict_train();
+            self.pending = Some(self.correspondences.spawn_refresh(x));
+        }
+        self.times.refresh += t.elapsed();
+    }
+
+    /// New nearest-body-vertex candidate lists from the model's current output, now.
+    pub fn refresh(&mut self) {
         let x = self.predict_train();
         self.correspondences.refresh(&x);
-        self.times.refresh += t.elapsed();
         self.refreshed = true;
+    }
+
+    /// Starts a refresh on a worker thread (see [`Trainer::upkeep`]); `finish_refresh` installs it.
+    pub fn start_refresh(&mut self) {
+        let x = self.predict_train();
+        self.pending = Some(self.correspondences.spawn_refresh(x));
+    }
+
+    /// Waits for a pending refresh and installs it; returns whether there was one.
+    pub fn finish_refresh(&mut self) -> bool {
+        match self.pending.take() {
+            Some(job) => {
+                let lists = job.join().expect("candidate refresh worker panicked");
+                self.correspondences.apply(lists);
+                true
+            }
+            None => false,
+        }
     }
 
     /// One optimisation step on the training poses `ids`.
@@ -345,13 +391,15 @@ impl Trainer {
             let mut g = self.file.model.logits.grad();
             let _ = g.index_fill_(0, &self.pinned, 0.0);
         }
-        let params: Vec<Tensor> = self
-            .model()
-            .parameters(self.settings.train_weights)
-            .into_iter()
-            .map(|(_, t)| t.shallow_clone())
+        let named = self.model().parameters(self.settings.train_weights);
+        // The skin logits move on another scale than the network (a weight going from 1e-4 to
+        // 0.5 is a logit change of ~9): they get a larger learning rate.
+        let rates: Vec<f64> = named
+            .iter()
+            .map(|(n, _)| if n == "W.logits" { lr * self.settings.weights_lr_scale } else { lr })
             .collect();
-        self.adam.update(&params, lr);
+        let params: Vec<Tensor> = named.into_iter().map(|(_, t)| t.shallow_clone()).collect();
+        self.adam.update(&params, &rates);
         let t4 = Instant::now();
         let times = &mut self.times;
         times.forward += t1 - t0;
@@ -367,7 +415,7 @@ impl Trainer {
 
     /// Runs one epoch; `on_step(done, total)` after each step. Appends to the history.
     pub fn run_epoch(&mut self, mut on_step: impl FnMut(usize, usize)) -> Result<EpochRecord, Blowup> {
-        self.refresh_if_due();
+        self.upkeep();
         let epoch = self.epoch();
         let lr = self.learning_rate(epoch);
         let mut order: Vec<i64> = (0..self.train.len() as i64).collect();
@@ -490,12 +538,13 @@ impl Adam {
         }
     }
 
-    fn update(&mut self, params: &[Tensor], lr: f64) {
+    /// One Adam step; `lr[i]` is parameter `i`'s learning rate.
+    fn update(&mut self, params: &[Tensor], lr: &[f64]) {
         self.step += 1;
         let c1 = 1.0 - BETA1.powi(self.step as i32);
         let c2 = 1.0 - BETA2.powi(self.step as i32);
         tch::no_grad(|| {
-            for ((p, m), v) in params.iter().zip(&mut self.m).zip(&mut self.v) {
+            for (((p, m), v), &lr) in params.iter().zip(&mut self.m).zip(&mut self.v).zip(lr) {
                 let mut g = p.grad();
                 if !g.defined() {
                     continue;

@@ -12,14 +12,16 @@ use crate::geometry::PointIndex;
 use crate::io::gltf_body::Body;
 use crate::rig::JointTransform;
 use rayon::prelude::*;
+use std::sync::Arc;
+use std::thread::JoinHandle;
 use tch::{Device, Kind, Tensor};
 
 pub struct Correspondences {
     /// Posed body vertices (the subset near the garment) of all poses, `[P * M, 3]`.
     points: Tensor,
     normals: Tensor,
-    /// Same, on the CPU, per pose, for the trees.
-    trees: Vec<PointIndex>,
+    /// One tree per pose over the posed subset (shared with refresh workers).
+    trees: Arc<Vec<PointIndex>>,
     /// Candidate rows of `points`, `[P, N, C]`.
     candidates: Tensor,
     subset: usize,
@@ -55,7 +57,7 @@ impl Correspondences {
         };
         let points = flat(&|x| &x.0);
         let normals = flat(&|x| &x.1);
-        let trees = posed.into_iter().map(|x| x.2).collect();
+        let trees = Arc::new(posed.into_iter().map(|x| x.2).collect());
         Correspondences {
             points,
             normals,
@@ -69,28 +71,27 @@ impl Correspondences {
         }
     }
 
-    /// New candidate lists from the garment's current positions in every pose.
+    /// Body vertices considered (the subset near the garment).
+    pub fn subset_len(&self) -> usize {
+        self.subset
+    }
+
+    /// New candidate lists from the garment's current positions in every pose, now.
     pub fn refresh(&mut self, garment: &[Vec<[f32; 3]>]) {
-        let m = self.subset;
-        let c = self.per_vertex;
-        let lists: Vec<i64> = garment
-            .par_iter()
-            .zip(&self.trees)
-            .enumerate()
-            .flat_map_iter(|(pose, (x, tree))| {
-                let base = (pose * m) as i64;
-                x.iter()
-                    .flat_map(|&p| {
-                        let mut hits = tree.k_nearest(p, c);
-                        // A tiny subset may hold fewer than c vertices: repeat the last one.
-                        while hits.len() < c {
-                            hits.push(*hits.last().expect("non-empty subset"));
-                        }
-                        hits.into_iter().map(move |(i, _)| base + i as i64)
-                    })
-                    .collect::<Vec<_>>()
-            })
-            .collect();
+        let lists = candidate_lists(&self.trees, garment, self.subset, self.per_vertex);
+        self.apply(lists);
+    }
+
+    /// The same, computed on a worker thread (the k-d tree queries use the rayon pool while
+    /// torch keeps training on its own thread); hand the result to [`Correspondences::apply`].
+    pub fn spawn_refresh(&self, garment: Vec<Vec<[f32; 3]>>) -> JoinHandle<Vec<i64>> {
+        let trees = Arc::clone(&self.trees);
+        let (m, c) = (self.subset, self.per_vertex);
+        std::thread::spawn(move || candidate_lists(&trees, &garment, m, c))
+    }
+
+    /// Installs candidate lists from [`Correspondences::spawn_refresh`].
+    pub fn apply(&mut self, lists: Vec<i64>) {
         let shape = self.candidates.size();
         self.candidates = Tensor::from_slice(&lists)
             .view(shape.as_slice())
@@ -126,5 +127,26 @@ pub fn body_subset(body: &Body, garment: &[[f32; 3]], reach: f32) -> Vec<u32> {
         .enumerate()
         .filter(|(_, &p)| index.nearest(p).1 <= reach)
         .map(|(i, _)| i as u32)
+        .collect()
+}
+
+/// Rows of the flattened `[P * m, 3]` body tensor: `c` per garment vertex per pose.
+fn candidate_lists(trees: &[PointIndex], garment: &[Vec<[f32; 3]>], m: usize, c: usize) -> Vec<i64> {
+    garment
+        .par_iter()
+        .zip(trees)
+        .enumerate()
+        .flat_map_iter(|(pose, (x, tree))| {
+            let base = (pose * m) as i64;
+            let mut out = Vec::with_capacity(x.len() * c);
+            for &p in x {
+                let start = out.len();
+                out.extend(tree.candidates(p, c).map(|i| base + i as i64));
+                // A tiny subset may hold fewer than c points: repeat the nearest.
+                let first = out[start];
+                out.resize(start + c, first);
+            }
+            out
+        })
         .collect()
 }
