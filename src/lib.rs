@@ -4,9 +4,12 @@
 
 pub mod bake;
 pub mod cli;
+pub mod eval;
 pub mod garment;
 pub mod geometry;
 pub mod io;
+pub mod models;
 pub mod motion;
 pub mod preview;
 pub mod rig;
+pub mod train;

@@ -7,6 +7,7 @@
 pub mod asset;
 pub mod atomic;
 pub mod gltf;
+pub mod pc2;
 #[cfg(feature = "usd")]
 pub mod usd;
 

@@ -78,6 +78,8 @@ def _export_layer(layer, path):
         usdc = os.path.join(tmp, inner)
         if not layer.Export(usdc):
             raise RuntimeError("usd-core could not write " + usdc)
+        # The zip records the file's modification time: pin it so packages are byte-identical.
+        os.utime(usdc, (946684800, 946684800))
         if not UsdUtils.CreateNewUsdzPackage(Sdf.AssetPath(usdc), path):
             raise RuntimeError("usd-core could not package " + path)
     finally:

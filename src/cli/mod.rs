@@ -1,8 +1,11 @@
 //! The `garmentbake` command line: one subcommand per pipeline step.
 
+mod bench;
+mod eval;
 mod inspect;
 mod pose;
 mod preview;
+mod train;
 
 use clap::{Parser, Subcommand};
 
@@ -26,6 +29,9 @@ enum Command {
     Inspect(inspect::Args),
     Pose(pose::Args),
     Preview(preview::Args),
+    Train(train::Args),
+    Eval(eval::Args),
+    Bench(bench::Args),
 }
 
 /// Runs the CLI; errors are one line on stderr and exit code 2 (1 is left for failed checks).
@@ -35,6 +41,9 @@ pub fn main() -> i32 {
         Command::Inspect(a) => inspect::run(a),
         Command::Pose(a) => pose::run(a),
         Command::Preview(a) => preview::run(a),
+        Command::Train(a) => train::run(a),
+        Command::Eval(a) => eval::run(a),
+        Command::Bench(a) => bench::run(a),
     };
     match result {
         Ok(code) => code,

@@ -1,20 +1,24 @@
 //! `garmentbake preview`: a PNG contact sheet of the posed body (and garments at rest).
 
-use crate::io::gltf_body::{read_body, Body};
+use crate::eval::model_frames;
+use crate::io::gltf_body::read_body;
 use crate::io::obj::read_obj;
+use crate::models::file::{self, check_skeleton};
 use crate::motion::{load_clip, read_maps};
 use crate::preview::{
     contact_sheet, save_png, DrawMesh, FramingMode, Panel, SheetOptions, View, BODY_GREY,
     GARMENT_COLORS,
 };
-use crate::rig::SkelAnimation;
+use crate::rig::{JointTransform, SkelAnimation};
 use anyhow::{bail, Result};
 use std::path::PathBuf;
 
 /// Render the body (grey) posed by a clip, front and side, to a PNG contact sheet.
 ///
 /// Without --motion the body is drawn in its rest pose together with any --garment OBJs
-/// (coloured), which shows how garments sit on the body before training.
+/// (coloured), which shows how garments sit on the body before training. With --model the
+/// trained garment is drawn posed on the body (and, with --lbs, next to plain linear blend
+/// skinning of the same garment, for comparison).
 #[derive(clap::Args)]
 pub struct Args {
     /// Skinned body (glTF/glb).
@@ -29,6 +33,12 @@ pub struct Args {
     /// Garment OBJ(s) drawn at rest (only without --motion).
     #[arg(long = "garment")]
     garments: Vec<PathBuf>,
+    /// Trained PBNS model (.safetensors): draw its garment posed by the clip.
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// With --model: add a panel of plain LBS (proximity weights, no PSD) next to each one.
+    #[arg(long)]
+    lbs: bool,
     /// Number of frames, evenly spaced over the clip.
     #[arg(long, default_value_t = 6)]
     frames: usize,
@@ -78,12 +88,39 @@ impl From<ViewArg> for View {
     }
 }
 
+/// One posed frame: the body and the garments drawn with it (positions, triangles).
+struct Shot {
+    label: String,
+    body: Vec<[f32; 3]>,
+    garments: Vec<(Vec<[f32; 3]>, usize)>,
+}
+
 pub fn run(args: Args) -> Result<i32> {
     let body = read_body(&args.body)?;
-    let shots: Vec<(String, Vec<[f32; 3]>)> = match &args.motion {
+    let model = match &args.model {
+        Some(path) => {
+            let m = file::load(path, tch::Device::Cpu)?;
+            check_skeleton(
+                m.skeleton(),
+                &body.skeleton,
+                &args.body.display().to_string(),
+            )?;
+            Some(m)
+        }
+        None => None,
+    };
+    if args.lbs && model.is_none() {
+        bail!("--lbs compares with a trained model: add --model");
+    }
+    let garments = args
+        .garments
+        .iter()
+        .map(|p| read_obj(p))
+        .collect::<Result<Vec<_>, _>>()?;
+    let poses: Vec<(String, Vec<JointTransform>)> = match &args.motion {
         Some(path) => {
             if !args.garments.is_empty() {
-                bail!("--garment is drawn at rest only; drop --motion (posing garments needs a trained model)");
+                bail!("--garment is drawn at rest only; drop --motion (posing garments needs a trained model: --model)");
             }
             let clip = load_clip(path, &read_maps(&args.maps)?, &body.skeleton, None)?;
             let frames = pick_frames(clip.animation.frame_count(), args.frames, &args.frame_list)?;
@@ -92,45 +129,90 @@ pub fn run(args: Args) -> Result<i32> {
                 .map(|&f| {
                     (
                         frame_label(&clip.animation, f),
-                        posed(&body, &clip.animation, f),
+                        clip.animation.local_pose(f),
                     )
                 })
                 .collect()
         }
-        None => vec![("rest".to_string(), body.mesh.positions.clone())],
+        None => vec![("rest".to_string(), body.skeleton.rest.clone())],
     };
-    let garments = args
-        .garments
+    let mut triangles: Vec<&[[u32; 3]]> = garments
         .iter()
-        .map(|p| read_obj(p))
-        .collect::<Result<Vec<_>, _>>()?;
+        .map(|g| g.mesh.triangles.as_slice())
+        .collect();
+    if let Some(m) = &model {
+        triangles.push(&m.garment.triangles);
+    }
+    let mut shots = Vec::new();
+    for (label, pose) in &poses {
+        let skinning = body.skeleton.skinning_matrices(pose);
+        let body_points = body.skin.skin_points(&body.mesh.positions, &skinning);
+        let mut drawn: Vec<(Vec<[f32; 3]>, usize)> = garments
+            .iter()
+            .enumerate()
+            .map(|(i, g)| (g.mesh.positions.clone(), i))
+            .collect();
+        let Some(m) = &model else {
+            shots.push(Shot {
+                label: label.clone(),
+                body: body_points,
+                garments: drawn,
+            });
+            continue;
+        };
+        let g = garments.len();
+        let x = model_frames(
+            &m.model,
+            &body.skeleton,
+            std::slice::from_ref(pose),
+            tch::Device::Cpu,
+        );
+        drawn.push((x.into_iter().next().expect("one frame"), g));
+        shots.push(Shot {
+            label: format!("{label} model"),
+            body: body_points.clone(),
+            garments: drawn,
+        });
+        if args.lbs {
+            let lbs = m.lbs.skin_points(&m.garment.positions, &skinning);
+            shots.push(Shot {
+                label: format!("{label} LBS"),
+                body: body_points,
+                garments: vec![(lbs, g)],
+            });
+        }
+    }
     let mut panels = Vec::new();
-    for (label, points) in &shots {
+    for shot in &shots {
         for view in &args.views {
             let mut meshes = vec![DrawMesh {
-                positions: points,
+                positions: &shot.body,
                 triangles: &body.mesh.triangles,
                 color: BODY_GREY,
             }];
-            for (i, g) in garments.iter().enumerate() {
-                let color = GARMENT_COLORS[i % GARMENT_COLORS.len()];
+            for (points, i) in &shot.garments {
                 meshes.push(DrawMesh {
-                    positions: &g.mesh.positions,
-                    triangles: &g.mesh.triangles,
-                    color,
+                    positions: points,
+                    triangles: triangles[*i],
+                    color: GARMENT_COLORS[*i % GARMENT_COLORS.len()],
                 });
             }
             panels.push(Panel {
                 meshes,
                 view: (*view).into(),
-                label: format!("{label} {view}"),
+                label: format!("{} {view}", shot.label),
             });
         }
     }
+    let per_frame = args.views.len() * if args.lbs { 2 } else { 1 };
     let opts = SheetOptions {
         panel_width: args.width,
         panel_height: args.height,
-        columns: (args.views.len() * shots.len()).min(args.views.len() * 3) as u32,
+        columns: if args.lbs {
+            per_frame
+        } else {
+            (per_frame * poses.len()).min(per_frame * 3)
+        } as u32,
         // Each frame framed on its own: a walking body stays large and centred.
         framing: FramingMode::PerPanel,
         ..Default::default()
@@ -163,9 +245,4 @@ pub(crate) fn pick_frames(total: usize, count: usize, list: &[usize]) -> Result<
             }
         })
         .collect())
-}
-
-fn posed(body: &Body, anim: &SkelAnimation, frame: usize) -> Vec<[f32; 3]> {
-    let skinning = body.skeleton.skinning_matrices(&anim.local_pose(frame));
-    body.skin.skin_points(&body.mesh.positions, &skinning)
 }

@@ -104,6 +104,17 @@ impl PointIndex {
         out
     }
 
+    /// Up to `k` indices of points near `p`, nearest first, without the exact tie and duplicate
+    /// handling of [`PointIndex::k_nearest`] (a duplicate position reports its lowest index
+    /// once). Cheaper; for candidate lists that are resolved exactly later. Deterministic.
+    pub fn candidates(&self, p: [f32; 3], k: usize) -> impl Iterator<Item = u32> + '_ {
+        let want = NonZeroUsize::new(k).unwrap_or(NonZeroUsize::MIN);
+        self.tree
+            .nearest_n::<SquaredEuclidean>(&p, want)
+            .into_iter()
+            .map(|hit| self.duplicates[hit.item as usize][0])
+    }
+
     /// [`PointIndex::nearest`] for each query point, in order.
     pub fn nearest_many(&self, points: &[[f32; 3]]) -> Vec<(u32, f32)> {
         points.iter().map(|&p| self.nearest(p)).collect()

@@ -1,7 +1,8 @@
 //! Linear blend skinning with a fixed number of influences per vertex (UsdSkel jointIndices /
 //! jointWeights, vertex-major), and the top-k pruning that keeps skins playable in engines.
 
-use nalgebra::{Matrix4, Point3};
+use crate::geometry::PointIndex;
+use nalgebra::{Matrix4, Point3, Vector3};
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct Skin {
@@ -43,6 +44,22 @@ impl Skin {
         }
     }
 
+    /// The skin of the vertices `subset` (in that order).
+    pub fn subset(&self, subset: &[u32]) -> Skin {
+        fn rows<T: Copy>(v: &[T], subset: &[u32], k: usize) -> Vec<T> {
+            subset
+                .iter()
+                .flat_map(|&s| v[s as usize * k..(s as usize + 1) * k].iter().copied())
+                .collect()
+        }
+        let k = self.influences;
+        Skin {
+            influences: k,
+            joint_indices: rows(&self.joint_indices, subset, k),
+            joint_weights: rows(&self.joint_weights, subset, k),
+        }
+    }
+
     pub fn vertex_count(&self) -> usize {
         self.joint_indices.len() / self.influences.max(1)
     }
@@ -73,18 +90,70 @@ impl Skin {
         }
     }
 
+    /// Weights for `points` by proximity to a skinned surface: the inverse-distance average of
+    /// the skins of the `neighbours` nearest surface points, pruned to `influences`. Averaging
+    /// several points matters: copying the single nearest body vertex tears a skirt between the
+    /// legs (neighbouring garment vertices jump between the two thighs).
+    pub fn transfer(
+        points: &[[f32; 3]],
+        surface: &Skin,
+        index: &PointIndex,
+        neighbours: usize,
+        influences: usize,
+    ) -> Skin {
+        // Keeps the weights finite for a point exactly on the surface.
+        const SOFTEN: f32 = 1.0e-3;
+        let per_vertex: Vec<Vec<(u16, f32)>> = points
+            .iter()
+            .map(|&p| {
+                let mut sum: Vec<(u16, f32)> = Vec::new();
+                for (b, d) in index.k_nearest(p, neighbours) {
+                    let s = 1.0 / (d + SOFTEN);
+                    for (j, w) in surface.vertex(b as usize) {
+                        match sum.iter_mut().find(|(k, _)| *k as usize == j) {
+                            Some(e) => e.1 += s * w,
+                            None => sum.push((j as u16, s * w)),
+                        }
+                    }
+                }
+                sum
+            })
+            .collect();
+        Skin::from_sparse(&per_vertex, influences, 0)
+    }
+
+    /// Blended skinning matrix of vertex `v`.
+    fn blended(&self, v: usize, skinning: &[Matrix4<f32>]) -> Matrix4<f32> {
+        let mut m = Matrix4::zeros();
+        for (j, w) in self.vertex(v) {
+            if w != 0.0 {
+                m += skinning[j] * w;
+            }
+        }
+        m
+    }
+
+    /// Rest normals carried by the blended rotation part (renormalised); the file's smooth
+    /// normals survive UV-seam splits, which recomputing from the posed faces would not.
+    pub fn skin_normals(&self, normals: &[[f32; 3]], skinning: &[Matrix4<f32>]) -> Vec<[f32; 3]> {
+        normals
+            .iter()
+            .enumerate()
+            .map(|(v, n)| {
+                let m = self.blended(v, skinning);
+                let q = m.fixed_view::<3, 3>(0, 0) * Vector3::from(*n);
+                let q = q / q.norm().max(f32::MIN_POSITIVE);
+                [q.x, q.y, q.z]
+            })
+            .collect()
+    }
+
     /// Linear blend skinning: `Σ w_j M_j p` for every rest point.
     pub fn skin_points(&self, rest: &[[f32; 3]], skinning: &[Matrix4<f32>]) -> Vec<[f32; 3]> {
         rest.iter()
             .enumerate()
             .map(|(v, p)| {
-                let mut m = Matrix4::zeros();
-                for (j, w) in self.vertex(v) {
-                    if w != 0.0 {
-                        m += skinning[j] * w;
-                    }
-                }
-                let q = m.transform_point(&Point3::from(*p));
+                let q = self.blended(v, skinning).transform_point(&Point3::from(*p));
                 [q.x, q.y, q.z]
             })
             .collect()
@@ -103,7 +172,6 @@ fn normalized(weights: &[f32]) -> Vec<f32> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::Vector3;
 
     #[test]
     fn keeps_top_weights_and_normalises() {

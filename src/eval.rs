@@ -1,0 +1,198 @@
+//! Evaluation: posing a model over a clip, and the PBNS metrics over posed frames (shared by
+//! training validation and `garmentbake eval`). Plain arrays on the CPU, exact nearest
+//! neighbours: this is the reference the exporters are compared with.
+
+use crate::garment::body_offsets;
+use crate::geometry::{face_normals, PointIndex, Topology, TriMesh};
+use crate::io::gltf_body::Body;
+use crate::models::pose_features::{tensor_points, PoseBatch};
+use crate::models::Pbns;
+use crate::rig::{JointTransform, Skeleton, Skin};
+use crate::train::losses::GRAVITY;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use tch::Device;
+
+/// Frames posed per forward pass when evaluating a clip.
+const CHUNK: usize = 64;
+
+/// The PBNS metrics, averaged over frames.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Metrics {
+    /// Mean |e − e_T| over edges, millimetres.
+    pub edge_mm: f64,
+    /// Mean 1 − cos between the normals of face-adjacent triangles.
+    pub bend: f64,
+    /// Percentage of vertices inside the body (d·n < 0 w.r.t. the nearest body vertex).
+    pub collided_pct: f64,
+    /// Gravitational potential energy Σ m g y, joules.
+    pub gravity_j: f64,
+}
+
+impl Metrics {
+    pub fn mean(frames: &[Metrics]) -> Metrics {
+        let n = frames.len().max(1) as f64;
+        let sum = |f: fn(&Metrics) -> f64| frames.iter().map(f).sum::<f64>() / n;
+        Metrics {
+            edge_mm: sum(|m| m.edge_mm),
+            bend: sum(|m| m.bend),
+            collided_pct: sum(|m| m.collided_pct),
+            gravity_j: sum(|m| m.gravity_j),
+        }
+    }
+}
+
+/// What the metrics need to know about the garment.
+pub struct ClothGeometry {
+    edges: Vec<[u32; 2]>,
+    rest_length: Vec<f32>,
+    triangles: Vec<[u32; 3]>,
+    hinges: Vec<[u32; 2]>,
+    mass: Vec<f32>,
+}
+
+impl ClothGeometry {
+    pub fn new(rest: &TriMesh, density: f32) -> ClothGeometry {
+        let topo = Topology::new(rest);
+        ClothGeometry {
+            rest_length: topo
+                .edges
+                .iter()
+                .map(|&e| length(&rest.positions, e))
+                .collect(),
+            edges: topo.edges,
+            triangles: rest.triangles.clone(),
+            hinges: topo.hinges.iter().map(|h| h.faces).collect(),
+            mass: rest.vertex_areas().iter().map(|a| a * density).collect(),
+        }
+    }
+
+    /// Metrics of one posed frame against the posed body.
+    pub fn frame(&self, x: &[[f32; 3]], body: &PosedBody) -> Metrics {
+        let edge: f64 = self
+            .edges
+            .iter()
+            .zip(&self.rest_length)
+            .map(|(&e, &r)| (length(x, e) - r).abs() as f64)
+            .sum();
+        let n = face_normals(x, &self.triangles);
+        let bend: f64 = self
+            .hinges
+            .iter()
+            .map(|&[a, b]| {
+                let (na, nb) = (n[a as usize], n[b as usize]);
+                1.0 - (na[0] * nb[0] + na[1] * nb[1] + na[2] * nb[2]) as f64
+            })
+            .sum();
+        let offsets = body_offsets(x, &body.points, &body.normals, &body.index);
+        let inside = offsets.iter().filter(|&&d| d < 0.0).count();
+        let gravity: f64 = x
+            .iter()
+            .zip(&self.mass)
+            .map(|(p, m)| (m * GRAVITY * p[1]) as f64)
+            .sum();
+        Metrics {
+            edge_mm: 1e3 * edge / self.edges.len().max(1) as f64,
+            bend: bend / self.hinges.len().max(1) as f64,
+            collided_pct: 100.0 * inside as f64 / x.len().max(1) as f64,
+            gravity_j: gravity,
+        }
+    }
+
+    /// Mean metrics over frames (in parallel).
+    pub fn frames(&self, garment: &[Vec<[f32; 3]>], bodies: &[PosedBody]) -> Metrics {
+        let per: Vec<Metrics> = garment
+            .par_iter()
+            .zip(bodies)
+            .map(|(x, b)| self.frame(x, b))
+            .collect();
+        Metrics::mean(&per)
+    }
+}
+
+fn length(p: &[[f32; 3]], [a, b]: [u32; 2]) -> f32 {
+    let (a, b) = (p[a as usize], p[b as usize]);
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+/// The body in one pose, with its nearest-point index.
+pub struct PosedBody {
+    pub points: Vec<[f32; 3]>,
+    pub normals: Vec<[f32; 3]>,
+    pub index: PointIndex,
+}
+
+impl PosedBody {
+    pub fn new(body: &Body, pose: &[JointTransform]) -> PosedBody {
+        let skinning = body.skeleton.skinning_matrices(pose);
+        let points = body.skin.skin_points(&body.mesh.positions, &skinning);
+        let normals = body.skin.skin_normals(&body.normals, &skinning);
+        let index = PointIndex::new(&points).expect("a posed body is finite and non-empty");
+        PosedBody {
+            points,
+            normals,
+            index,
+        }
+    }
+
+    /// Every pose, in parallel.
+    pub fn many(body: &Body, poses: &[Vec<JointTransform>]) -> Vec<PosedBody> {
+        poses.par_iter().map(|p| PosedBody::new(body, p)).collect()
+    }
+}
+
+/// The model's garment for every pose (world space), in chunks, without gradients.
+pub fn model_frames(
+    model: &Pbns,
+    skeleton: &Skeleton,
+    poses: &[Vec<JointTransform>],
+    device: Device,
+) -> Vec<Vec<[f32; 3]>> {
+    let n = model.shape.vertices;
+    let mut out = Vec::with_capacity(poses.len());
+    tch::no_grad(|| {
+        for chunk in poses.chunks(CHUNK) {
+            let batch = PoseBatch::new(skeleton, chunk, device);
+            let points = tensor_points(&model.forward(&batch).vertices);
+            out.extend(points.chunks_exact(n).map(<[_]>::to_vec));
+        }
+    });
+    out
+}
+
+/// Plain linear blend skinning of the rest garment (the baseline without PSD).
+pub fn lbs_frames(
+    skin: &Skin,
+    rest: &[[f32; 3]],
+    skeleton: &Skeleton,
+    poses: &[Vec<JointTransform>],
+) -> Vec<Vec<[f32; 3]>> {
+    poses
+        .par_iter()
+        .map(|p| skin.skin_points(rest, &skeleton.skinning_matrices(p)))
+        .collect()
+}
+
+/// Mean metrics of several garment series (e.g. model and plain LBS) over the same poses; the
+/// body is posed one frame at a time so long clips need little memory.
+pub fn compare(
+    geometry: &ClothGeometry,
+    series: &[&[Vec<[f32; 3]>]],
+    body: &Body,
+    poses: &[Vec<JointTransform>],
+) -> Vec<Metrics> {
+    let per_frame: Vec<Vec<Metrics>> = poses
+        .par_iter()
+        .enumerate()
+        .map(|(f, pose)| {
+            let posed = PosedBody::new(body, pose);
+            series
+                .iter()
+                .map(|s| geometry.frame(&s[f], &posed))
+                .collect()
+        })
+        .collect();
+    (0..series.len())
+        .map(|k| Metrics::mean(&per_frame.iter().map(|m| m[k]).collect::<Vec<_>>()))
+        .collect()
+}

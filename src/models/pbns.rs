@@ -1,0 +1,220 @@
+//! The PBNS static model: `V(θ) = LBS(T + Σ_k X_k(θ)·D_k, θ, W)`.
+//!
+//! `X = f(θ)` is an MLP of fully-connected ReLU layers over the pose features, `D` the PSD basis
+//! (`[K, N, 3]`, K = MLP width) and `W` sparse blend weights: every vertex has `influences` joint
+//! slots fixed at initialisation and one trainable logit per slot; a softmax over the slots gives
+//! non-negative weights that sum to one. Engines play at most 4 (or 8) influences, so keeping
+//! the sparsity pattern fixed means baking the trained skin loses nothing.
+
+use super::pose_features::PoseBatch;
+use crate::rig::{Skeleton, Skin};
+use tch::{Device, Kind, Tensor};
+
+/// Logit of a slot that holds no joint: its softmax weight is exactly zero in f32 and so is its
+/// gradient, so it never becomes active.
+pub const EMPTY_SLOT_LOGIT: f32 = -1.0e4;
+/// Initial weight of a slot added as a training candidate (an ancestor of the vertex's main
+/// joint): small enough that the initial skin is the proximity skin, large enough for Adam.
+pub const CANDIDATE_WEIGHT: f32 = 1.0e-4;
+
+/// Sizes of a model.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct PbnsShape {
+    /// MLP inputs (pose features).
+    pub features: usize,
+    /// Width of every MLP layer = number of PSD basis vectors K.
+    pub width: usize,
+    /// Fully-connected ReLU layers.
+    pub layers: usize,
+    pub vertices: usize,
+    pub joints: usize,
+    /// Joint slots per vertex (4 or 8).
+    pub influences: usize,
+}
+
+pub struct Pbns {
+    pub shape: PbnsShape,
+    /// `(weight [in, out], bias [out])` per layer.
+    pub mlp: Vec<(Tensor, Tensor)>,
+    /// PSD basis `[K, N * 3]`.
+    pub psd: Tensor,
+    /// Rest garment `T` `[N, 3]`.
+    pub template: Tensor,
+    /// Joint of each slot `[N, influences]` (int64).
+    pub joints: Tensor,
+    /// Slot logits `[N, influences]`.
+    pub logits: Tensor,
+}
+
+/// What the forward pass returns: posed vertices and the rest-space PSD displacement (which the
+/// pinning term needs).
+pub struct Output {
+    pub vertices: Tensor,
+    pub displacement: Tensor,
+}
+
+impl Pbns {
+    /// A fresh model: MLP initialised like PyTorch's `Linear` (uniform ±1/√fan_in, from the
+    /// global tch seed), `D = 0` (so the untrained model is plain LBS), `W` from `skin`.
+    pub fn new(
+        shape: PbnsShape,
+        template: &[[f32; 3]],
+        skin: &Skin,
+        skeleton: &Skeleton,
+        device: Device,
+    ) -> Pbns {
+        let opts = (Kind::Float, device);
+        let mut mlp = Vec::with_capacity(shape.layers);
+        let mut fan_in = shape.features;
+        for _ in 0..shape.layers {
+            let bound = 1.0 / (fan_in as f64).sqrt();
+            let w =
+                Tensor::zeros([fan_in as i64, shape.width as i64], opts).uniform_(-bound, bound);
+            let b = Tensor::zeros([shape.width as i64], opts).uniform_(-bound, bound);
+            mlp.push((w, b));
+            fan_in = shape.width;
+        }
+        let psd = Tensor::zeros([shape.width as i64, 3 * shape.vertices as i64], opts);
+        let (joints, logits) = slot_logits(skin, skeleton, shape.influences);
+        let n = shape.vertices as i64;
+        let k = shape.influences as i64;
+        Pbns {
+            shape,
+            mlp,
+            psd,
+            template: points_tensor(template, device),
+            joints: Tensor::from_slice(&joints).view([n, k]).to_device(device),
+            logits: Tensor::from_slice(&logits).view([n, k]).to_device(device),
+        }
+    }
+
+    /// The trainable tensors with their file names; `weights` adds the slot logits.
+    pub fn parameters(&self, weights: bool) -> Vec<(String, &Tensor)> {
+        let mut out = Vec::new();
+        for (i, (w, b)) in self.mlp.iter().enumerate() {
+            out.push((format!("mlp.{i}.weight"), w));
+            out.push((format!("mlp.{i}.bias"), b));
+        }
+        out.push(("psd".to_string(), &self.psd));
+        if weights {
+            out.push(("W.logits".to_string(), &self.logits));
+        }
+        out
+    }
+
+    /// Turns gradient tracking on for the trainable tensors.
+    pub fn set_trainable(&mut self, weights: bool) {
+        for (w, b) in &mut self.mlp {
+            *w = w.set_requires_grad(true);
+            *b = b.set_requires_grad(true);
+        }
+        self.psd = self.psd.set_requires_grad(true);
+        self.logits = self.logits.set_requires_grad(weights);
+    }
+
+    /// Blend weights `[N, influences]`: non-negative, summing to one per vertex.
+    pub fn weights(&self) -> Tensor {
+        self.logits.softmax(-1, Kind::Float)
+    }
+
+    /// `X(θ)·D` in rest space, `[B, N, 3]`.
+    pub fn displacement(&self, features: &Tensor) -> Tensor {
+        let mut x = features.shallow_clone();
+        for (w, b) in &self.mlp {
+            x = b.addmm(&x, w).relu();
+        }
+        x.matmul(&self.psd)
+            .view([-1, self.shape.vertices as i64, 3])
+    }
+
+    /// Linear blend skinning of rest points `[B, N, 3]` with skinning matrices `[B, J, 12]`.
+    pub fn skin_points(&self, rest: &Tensor, skinning: &Tensor) -> Tensor {
+        let (n, j) = (self.shape.vertices as i64, self.shape.joints as i64);
+        // Dense [N, J] weights: one small matmul blends all joints at once (cheaper than
+        // gathering k matrices per vertex, and differentiable in the weights).
+        let dense = Tensor::zeros([n, j], (Kind::Float, rest.device())).scatter_add(
+            1,
+            &self.joints,
+            &self.weights(),
+        );
+        let b = skinning.size()[0];
+        let m = dense.matmul(skinning).view([b, n, 3, 4]);
+        let linear = m.narrow(3, 0, 3);
+        let translation = m.select(3, 3);
+        (linear * rest.unsqueeze(2)).sum_dim_intlist(-1, false, Kind::Float) + translation
+    }
+
+    pub fn forward(&self, batch: &PoseBatch) -> Output {
+        let displacement = self.displacement(&batch.features);
+        let rest = self.template.unsqueeze(0) + &displacement;
+        Output {
+            vertices: self.skin_points(&rest, &batch.skinning),
+            displacement,
+        }
+    }
+
+    /// The current blend weights as an engine skin (exactly the model's weights: the pattern
+    /// already has at most `influences` entries).
+    pub fn skin(&self) -> Skin {
+        let joints: Vec<i64> = flat(&self.joints, Kind::Int64);
+        let weights: Vec<f32> = flat(&self.weights(), Kind::Float);
+        let per_vertex: Vec<Vec<(u16, f32)>> = joints
+            .chunks_exact(self.shape.influences)
+            .zip(weights.chunks_exact(self.shape.influences))
+            .map(|(j, w)| j.iter().zip(w).map(|(&j, &w)| (j as u16, w)).collect())
+            .collect();
+        Skin::from_sparse(&per_vertex, self.shape.influences, 0)
+    }
+}
+
+/// Slots and logits from an initial skin: its joints (log weights), then ancestors of the
+/// vertex's main joint as low-weight candidates (a skirt's hem may need the hips), then empty.
+fn slot_logits(skin: &Skin, skeleton: &Skeleton, influences: usize) -> (Vec<i64>, Vec<f32>) {
+    let mut joints = Vec::with_capacity(skin.vertex_count() * influences);
+    let mut logits = Vec::with_capacity(skin.vertex_count() * influences);
+    for v in 0..skin.vertex_count() {
+        let mut slots: Vec<(usize, f32)> = skin.vertex(v).filter(|(_, w)| *w > 0.0).collect();
+        slots.truncate(influences);
+        let mut ancestor = slots.first().and_then(|&(j, _)| skeleton.parents[j]);
+        while let Some(a) = ancestor {
+            if slots.len() >= influences {
+                break;
+            }
+            if !slots.iter().any(|&(j, _)| j == a) {
+                slots.push((a, CANDIDATE_WEIGHT));
+            }
+            ancestor = skeleton.parents[a];
+        }
+        for k in 0..influences {
+            match slots.get(k) {
+                Some(&(j, w)) => {
+                    joints.push(j as i64);
+                    logits.push(w.ln());
+                }
+                None => {
+                    joints.push(0);
+                    logits.push(EMPTY_SLOT_LOGIT);
+                }
+            }
+        }
+    }
+    (joints, logits)
+}
+
+pub fn points_tensor(points: &[[f32; 3]], device: Device) -> Tensor {
+    let flat: Vec<f32> = points.iter().flatten().copied().collect();
+    Tensor::from_slice(&flat)
+        .view([points.len() as i64, 3])
+        .to_device(device)
+}
+
+/// Any tensor as a flat vector on the CPU.
+pub fn flat<T: tch::kind::Element + Copy>(t: &Tensor, kind: Kind) -> Vec<T> {
+    let t = t
+        .detach()
+        .to_device(Device::Cpu)
+        .to_kind(kind)
+        .contiguous()
+        .view([-1]);
+    Vec::try_from(&t).expect("tensor of the requested kind")
+}

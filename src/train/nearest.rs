@@ -1,0 +1,170 @@
+//! Collision correspondences for training: the nearest body vertex of every garment vertex in
+//! every training pose, without a k-d tree query inside the training step.
+//!
+//! The body pose set is fixed, so the posed body (near the garment) is computed once per pose
+//! and kept as a tensor, with one k-d tree per pose. Every few epochs each (pose, garment
+//! vertex) gets a short list of candidate body vertices from the tree, queried at the model's
+//! current output; inside a step the nearest candidate is picked with tensor ops (a gather and
+//! an argmin). The garment moves little between refreshes, so the true nearest vertex stays in
+//! the list; the reference code instead called a CPU k-d tree from its GPU loop every step.
+
+use crate::geometry::PointIndex;
+use crate::io::gltf_body::Body;
+use crate::rig::JointTransform;
+use rayon::prelude::*;
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use tch::{Device, Kind, Tensor};
+
+pub struct Correspondences {
+    /// Posed body vertices (the subset near the garment) of all poses, `[P * M, 3]`.
+    points: Tensor,
+    normals: Tensor,
+    /// One tree per pose over the posed subset (shared with refresh workers).
+    trees: Arc<Vec<PointIndex>>,
+    /// Candidate rows of `points`, `[P, N, C]`.
+    candidates: Tensor,
+    subset: usize,
+    per_vertex: usize,
+}
+
+impl Correspondences {
+    /// Poses the body subset `subset` (body vertex indices) for every pose.
+    pub fn new(
+        body: &Body,
+        subset: &[u32],
+        poses: &[Vec<JointTransform>],
+        per_vertex: usize,
+        garment_vertices: usize,
+        device: Device,
+    ) -> Correspondences {
+        let rest: Vec<[f32; 3]> = subset
+            .iter()
+            .map(|&v| body.mesh.positions[v as usize])
+            .collect();
+        let rest_n: Vec<[f32; 3]> = subset.iter().map(|&v| body.normals[v as usize]).collect();
+        let skin = body.skin.subset(subset);
+        let posed: Vec<(Vec<[f32; 3]>, Vec<[f32; 3]>, PointIndex)> = poses
+            .par_iter()
+            .map(|pose| {
+                let m = body.skeleton.skinning_matrices(pose);
+                let p = skin.skin_points(&rest, &m);
+                let n = skin.skin_normals(&rest_n, &m);
+                let tree = PointIndex::new(&p).expect("posed body is finite");
+                (p, n, tree)
+            })
+            .collect();
+        let flat = |f: &dyn Fn(&(Vec<[f32; 3]>, Vec<[f32; 3]>, PointIndex)) -> &Vec<[f32; 3]>| {
+            let v: Vec<f32> = posed
+                .iter()
+                .flat_map(|x| f(x).iter().flatten().copied())
+                .collect();
+            Tensor::from_slice(&v).view([-1, 3]).to_device(device)
+        };
+        let points = flat(&|x| &x.0);
+        let normals = flat(&|x| &x.1);
+        let trees = Arc::new(posed.into_iter().map(|x| x.2).collect());
+        Correspondences {
+            points,
+            normals,
+            trees,
+            candidates: Tensor::zeros(
+                [
+                    poses.len() as i64,
+                    garment_vertices as i64,
+                    per_vertex as i64,
+                ],
+                (Kind::Int64, device),
+            ),
+            subset: subset.len(),
+            per_vertex,
+        }
+    }
+
+    /// Body vertices considered (the subset near the garment).
+    pub fn subset_len(&self) -> usize {
+        self.subset
+    }
+
+    /// New candidate lists from the garment's current positions in every pose, now.
+    pub fn refresh(&mut self, garment: &[Vec<[f32; 3]>]) {
+        let lists = candidate_lists(&self.trees, garment, self.subset, self.per_vertex);
+        self.apply(lists);
+    }
+
+    /// The same, computed on a worker thread (the k-d tree queries use the rayon pool while
+    /// torch keeps training on its own thread); hand the result to [`Correspondences::apply`].
+    pub fn spawn_refresh(&self, garment: Vec<Vec<[f32; 3]>>) -> JoinHandle<Vec<i64>> {
+        let trees = Arc::clone(&self.trees);
+        let (m, c) = (self.subset, self.per_vertex);
+        std::thread::spawn(move || candidate_lists(&trees, &garment, m, c))
+    }
+
+    /// Installs candidate lists from [`Correspondences::spawn_refresh`].
+    pub fn apply(&mut self, lists: Vec<i64>) {
+        let shape = self.candidates.size();
+        self.candidates = Tensor::from_slice(&lists)
+            .view(shape.as_slice())
+            .to_device(self.candidates.device());
+    }
+
+    /// Nearest body point and normal `[B, N, 3]` for the batch's poses `[B]` and garment `x`.
+    pub fn resolve(&self, poses: &Tensor, x: &Tensor) -> (Tensor, Tensor) {
+        tch::no_grad(|| {
+            let cand = self.candidates.index_select(0, poses);
+            let size = cand.size();
+            let (b, n, c) = (size[0], size[1], size[2]);
+            let p = self
+                .points
+                .index_select(0, &cand.view([-1]))
+                .view([b, n, c, 3]);
+            let d2 = (p - x.detach().unsqueeze(2))
+                .square()
+                .sum_dim_intlist(-1, false, Kind::Float);
+            let best = cand.gather(2, &d2.argmin(-1, true), false).view([-1]);
+            (
+                self.points.index_select(0, &best).view([b, n, 3]),
+                self.normals.index_select(0, &best).view([b, n, 3]),
+            )
+        })
+    }
+}
+
+/// Body vertices within `reach` of any garment vertex at rest: the only ones a garment vertex
+/// can be nearest to in a pose (the garment is skinned to the same bones).
+pub fn body_subset(body: &Body, garment: &[[f32; 3]], reach: f32) -> Vec<u32> {
+    let index = PointIndex::new(garment).expect("garment is finite");
+    body.mesh
+        .positions
+        .par_iter()
+        .enumerate()
+        .filter(|(_, &p)| index.nearest(p).1 <= reach)
+        .map(|(i, _)| i as u32)
+        .collect()
+}
+
+/// Rows of the flattened `[P * m, 3]` body tensor: `c` per garment vertex per pose.
+fn candidate_lists(
+    trees: &[PointIndex],
+    garment: &[Vec<[f32; 3]>],
+    m: usize,
+    c: usize,
+) -> Vec<i64> {
+    garment
+        .par_iter()
+        .zip(trees)
+        .enumerate()
+        .flat_map_iter(|(pose, (x, tree))| {
+            let base = (pose * m) as i64;
+            let mut out = Vec::with_capacity(x.len() * c);
+            for &p in x {
+                let start = out.len();
+                out.extend(tree.candidates(p, c).map(|i| base + i as i64));
+                // A tiny subset may hold fewer than c points: repeat the nearest.
+                let first = out[start];
+                out.resize(start + c, first);
+            }
+            out
+        })
+        .collect()
+}

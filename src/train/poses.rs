@@ -1,0 +1,124 @@
+//! The training pose set, balanced as PBNS does: walk the clips' frames in order and keep a frame
+//! only if it differs from every kept frame by at least a threshold in some joint-rotation
+//! component; then split train / validation.
+//!
+//! Compared are only the joints that move the garment (a joint whose subtree carries part of the
+//! garment's skin): with every joint, fingers and thumbs dominate and few poses survive. Global
+//! orientation (the root) is never compared; it is applied by skinning.
+
+use crate::rig::{JointTransform, SkelAnimation, Skeleton, Skin};
+use nalgebra::Vector3;
+
+/// One training pose: where it came from and its local joint transforms.
+#[derive(Clone, Debug)]
+pub struct Pose {
+    pub clip: usize,
+    pub frame: usize,
+    pub local: Vec<JointTransform>,
+}
+
+pub struct PoseSet {
+    pub train: Vec<Pose>,
+    pub validation: Vec<Pose>,
+    /// Frames looked at.
+    pub frames_seen: usize,
+    /// The joints compared.
+    pub joints: Vec<usize>,
+}
+
+/// Joints (never a root) whose subtree carries at least `min_share` of the garment's skin weight.
+pub fn garment_joints(skeleton: &Skeleton, skin: &Skin, min_share: f32) -> Vec<usize> {
+    let n = skeleton.joint_count();
+    let mut subtree = vec![0.0f64; n];
+    for v in 0..skin.vertex_count() {
+        for (j, w) in skin.vertex(v) {
+            subtree[j] += w as f64;
+        }
+    }
+    // Parents come first, so a reverse sweep accumulates children into parents.
+    for j in (0..n).rev() {
+        if let Some(p) = skeleton.parents[j] {
+            subtree[p] += subtree[j];
+        }
+    }
+    let total = skin.vertex_count().max(1) as f64;
+    (0..n)
+        .filter(|&j| skeleton.parents[j].is_some() && subtree[j] / total >= min_share as f64)
+        .collect()
+}
+
+/// Greedy balanced selection over all frames of all clips: `(clip, frame)` pairs, in order.
+pub fn balanced(clips: &[SkelAnimation], joints: &[usize], threshold: f32) -> Vec<(usize, usize)> {
+    let mut kept: Vec<Vec<Vector3<f32>>> = Vec::new();
+    let mut out = Vec::new();
+    for (c, clip) in clips.iter().enumerate() {
+        for f in 0..clip.frame_count() {
+            let rv: Vec<Vector3<f32>> = joints
+                .iter()
+                .map(|&j| clip.rotations[f][j].scaled_axis())
+                .collect();
+            let near = kept
+                .iter()
+                .any(|k| k.iter().zip(&rv).all(|(a, b)| (a - b).amax() < threshold));
+            if !near {
+                kept.push(rv);
+                out.push((c, f));
+            }
+        }
+    }
+    out
+}
+
+/// Balanced set split into train and validation (`validation` fraction, shuffled by `seed`).
+pub fn pose_set(
+    clips: &[SkelAnimation],
+    joints: Vec<usize>,
+    threshold: f32,
+    validation: f32,
+    seed: u64,
+) -> PoseSet {
+    let mut picked = balanced(clips, &joints, threshold);
+    shuffle(&mut picked, seed);
+    let n_val = ((picked.len() as f32 * validation).round() as usize).min(picked.len());
+    let pose = |&(c, f): &(usize, usize)| Pose {
+        clip: c,
+        frame: f,
+        local: clips[c].local_pose(f),
+    };
+    let (val, train) = picked.split_at(n_val);
+    PoseSet {
+        train: train.iter().map(pose).collect(),
+        validation: val.iter().map(pose).collect(),
+        frames_seen: clips.iter().map(SkelAnimation::frame_count).sum(),
+        joints,
+    }
+}
+
+/// SplitMix64: a tiny deterministic generator (the data order must not depend on platform RNGs).
+pub struct Rng(u64);
+
+impl Rng {
+    pub fn new(seed: u64) -> Rng {
+        Rng(seed ^ 0x9E37_79B9_7F4A_7C15)
+    }
+
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    pub fn below(&mut self, n: usize) -> usize {
+        (self.next_u64() % n as u64) as usize
+    }
+}
+
+/// Fisher–Yates with [`Rng`].
+pub fn shuffle<T>(items: &mut [T], seed: u64) {
+    let mut rng = Rng::new(seed);
+    for i in (1..items.len()).rev() {
+        items.swap(i, rng.below(i + 1));
+    }
+}
