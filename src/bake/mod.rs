@@ -1,6 +1,7 @@
 //! Turns rig data and model output into the exporter-neutral baked asset (`exporters::asset`).
 
 pub mod compress;
+pub mod pbns;
 
 use crate::geometry::mesh::TriMesh;
 use crate::geometry::normals::vertex_normals;

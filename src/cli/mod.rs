@@ -1,5 +1,6 @@
 //! The `garmentbake` command line: one subcommand per pipeline step.
 
+mod bake;
 mod bench;
 mod eval;
 mod inspect;
@@ -31,6 +32,7 @@ enum Command {
     Preview(preview::Args),
     Train(train::Args),
     Eval(eval::Args),
+    Bake(bake::Args),
     Bench(bench::Args),
 }
 
@@ -43,6 +45,7 @@ pub fn main() -> i32 {
         Command::Preview(a) => preview::run(a),
         Command::Train(a) => train::run(a),
         Command::Eval(a) => eval::run(a),
+        Command::Bake(a) => bake::run(a),
         Command::Bench(a) => bench::run(a),
     };
     match result {

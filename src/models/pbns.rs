@@ -117,13 +117,20 @@ impl Pbns {
         self.logits.softmax(-1, Kind::Float)
     }
 
-    /// `X(θ)·D` in rest space, `[B, N, 3]`.
-    pub fn displacement(&self, features: &Tensor) -> Tensor {
+    /// The MLP output `X(θ)`, `[B, K]`: the weights of the PSD basis (a baked clip's
+    /// blend-shape weights before compression).
+    pub fn coefficients(&self, features: &Tensor) -> Tensor {
         let mut x = features.shallow_clone();
         for (w, b) in &self.mlp {
             x = b.addmm(&x, w).relu();
         }
-        x.matmul(&self.psd)
+        x
+    }
+
+    /// `X(θ)·D` in rest space, `[B, N, 3]`.
+    pub fn displacement(&self, features: &Tensor) -> Tensor {
+        self.coefficients(features)
+            .matmul(&self.psd)
             .view([-1, self.shape.vertices as i64, 3])
     }
 

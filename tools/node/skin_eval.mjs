@@ -31,16 +31,16 @@ import { GLTFLoader } from 'three/examples/jsm/loaders/GLTFLoader.js';
 // ------------------------------------------------------------------ args
 function usage(msg) {
 	if (msg) console.error(`skin_eval: ${msg}`);
-	console.error('usage: node skin_eval.mjs FILE.glb|FILE.gltf --times t1,t2,... [--animation NAME|INDEX] [--mesh NAME] [--out result.json]');
+	console.error('usage: node skin_eval.mjs FILE.glb|FILE.gltf --times t1,t2,... [--animation NAME|INDEX] [--mesh NAME] [--out result.json] [--pc2 REF.pc2 [--pc2-map MAP.json]]');
 	process.exit(2);
 }
 
-const opts = { times: null, animation: null, mesh: null, out: null, file: null };
+const opts = { times: null, animation: null, mesh: null, out: null, file: null, pc2: null, 'pc2-map': null };
 {
 	const a = process.argv.slice(2);
 	for (let i = 0; i < a.length; i++) {
 		const k = a[i];
-		if (k === '--times' || k === '--animation' || k === '--mesh' || k === '--out') {
+		if (['--times', '--animation', '--mesh', '--out', '--pc2', '--pc2-map'].includes(k)) {
 			if (i + 1 >= a.length) usage(`${k} needs a value`);
 			opts[k.slice(2)] = a[++i];
 		} else if (k.startsWith('--')) usage(`unknown option ${k}`);
@@ -177,6 +177,22 @@ scene.traverse((o) => {
 });
 if (meshes.length === 0) usage(opts.mesh !== null ? `no mesh named ${opts.mesh}` : 'no meshes in file');
 
+// ------------------------------------------------------------------ reference
+// --pc2: compare with a point cache instead of dumping positions (long clips stay small):
+// the i-th time is compared with the cache's i-th sample; --pc2-map gives, per file vertex, the
+// cache vertex it came from (vertices split at UV seams).
+let reference = null;
+if (opts.pc2) {
+	const b = fs.readFileSync(opts.pc2);
+	if (b.toString('latin1', 0, 11) !== 'POINTCACHE2') usage(`${opts.pc2}: not a PC2 file`);
+	const points = b.readInt32LE(16);
+	const samples = b.readInt32LE(28);
+	const data = new Float32Array(b.buffer.slice(b.byteOffset + 32, b.byteOffset + 32 + samples * points * 12));
+	const map = opts['pc2-map'] ? JSON.parse(fs.readFileSync(opts['pc2-map'], 'utf8')) : null;
+	if (opts.times.length > samples) usage(`${opts.pc2} has ${samples} samples, ${opts.times.length} times asked`);
+	reference = { points, data, map };
+}
+
 // ------------------------------------------------------------------ evaluate
 const t0 = performance.now();
 const v = new THREE.Vector3();
@@ -198,6 +214,20 @@ for (const t of opts.times) {
 			pos[3 * i] = v.x;
 			pos[3 * i + 1] = v.y;
 			pos[3 * i + 2] = v.z;
+		}
+		if (reference) {
+			const k = rec.frames.length;
+			let max = 0, sum = 0;
+			for (let i = 0; i < n; i++) {
+				const r = reference.map ? reference.map[i] : i;
+				const o = (k * reference.points + r) * 3;
+				const d = Math.hypot(pos[3 * i] - reference.data[o], pos[3 * i + 1] - reference.data[o + 1], pos[3 * i + 2] - reference.data[o + 2]);
+				max = Math.max(max, d);
+				sum += d;
+			}
+			rec.frames.push({ time: t, max_error: max, mean_error: sum / n });
+			rec.max_error = Math.max(rec.max_error ?? 0, max);
+			continue;
 		}
 		rec.frames.push({
 			time: t,

@@ -1,0 +1,265 @@
+//! Baking a PBNS model: `D` is a blend-shape set and `W` a skin, so the file replays
+//! `LBS(T + Σ w_k B_k, θ, W)` exactly like the network, with `B` the (compressed) basis and `w`
+//! the MLP output projected on it, one weight track per clip.
+
+use super::compress::{spectrum, UsedOffsets};
+use super::{animation_asset, skeleton_asset, skinned_mesh_asset, BODY_COLOR};
+use crate::models::file::ModelFile;
+use crate::models::pbns::flat;
+use crate::models::pose_features::PoseBatch;
+use crate::rig::{SkelAnimation, Skin};
+use anyhow::{bail, Result};
+use exporters::asset::{BakedAsset, BlendShape};
+use tch::{Device, Kind};
+
+/// Garment colour in viewers.
+pub const GARMENT_COLOR: [f32; 3] = [0.25, 0.45, 0.8];
+
+/// How many blend shapes to keep.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Targets {
+    /// The network's own basis, uncompressed (K = MLP width).
+    Full,
+    Count(usize),
+    /// The fewest whose max offset error over the baked clips is within this many metres.
+    Tolerance(f32),
+}
+
+pub struct BakeOptions {
+    pub targets: Targets,
+    /// Joint influences per vertex in the file (None: the model's own).
+    pub influences: Option<usize>,
+    pub with_body: bool,
+}
+
+/// What the bake cost, per clip and overall, in metres (world space, after skinning).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct BakeReport {
+    pub targets: usize,
+    /// Numerical rank of the offsets the clips use.
+    pub used_rank: usize,
+    pub influences: usize,
+    pub clips: Vec<ClipError>,
+}
+
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ClipError {
+    pub clip: String,
+    pub frames: usize,
+    pub max_error_m: f32,
+    pub mean_error_m: f32,
+}
+
+/// Network coefficients `X` for every frame of a clip, `[frame][k]`.
+fn clip_coefficients(model: &ModelFile, clip: &SkelAnimation, device: Device) -> Vec<Vec<f32>> {
+    let poses: Vec<_> = (0..clip.frame_count())
+        .map(|f| clip.local_pose(f))
+        .collect();
+    let k = model.model.shape.width;
+    tch::no_grad(|| {
+        poses
+            .chunks(256)
+            .flat_map(|chunk| {
+                let batch = PoseBatch::new(model.skeleton(), chunk, device);
+                let x: Vec<f32> = flat(&model.model.coefficients(&batch.features), Kind::Float);
+                x.chunks_exact(k).map(<[f32]>::to_vec).collect::<Vec<_>>()
+            })
+            .collect()
+    })
+}
+
+/// The network's PSD basis `D` as K offset sets.
+fn basis(model: &ModelFile) -> Vec<Vec<[f32; 3]>> {
+    let d: Vec<f32> = flat(&model.model.psd, Kind::Float);
+    let n = model.model.shape.vertices;
+    d.chunks_exact(3 * n)
+        .map(|c| c.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect())
+        .collect()
+}
+
+/// Bakes `model` over `clips` (already retargeted onto the model's skeleton).
+pub fn bake(
+    model: &ModelFile,
+    clips: &[SkelAnimation],
+    opts: &BakeOptions,
+    device: Device,
+) -> Result<(BakedAsset, BakeReport)> {
+    let basis = basis(model);
+    let per_clip: Vec<Vec<Vec<f32>>> = clips
+        .iter()
+        .map(|c| clip_coefficients(model, c, device))
+        .collect();
+    let all: Vec<Vec<f32>> = per_clip.iter().flatten().cloned().collect();
+    let used = UsedOffsets {
+        basis: &basis,
+        coefficients: &all,
+    };
+    let spectrum = spectrum(&used);
+    let top = spectrum.singular_values.first().copied().unwrap_or(0.0);
+    let used_rank = spectrum
+        .singular_values
+        .iter()
+        .filter(|&&s| s > 1e-6 * top)
+        .count();
+    let (targets, weights) = match opts.targets {
+        Targets::Full => (basis.clone(), all.clone()),
+        Targets::Count(k) => {
+            let c = spectrum.truncate(&used, k);
+            (c.targets, c.weights)
+        }
+        Targets::Tolerance(t) => {
+            let c = spectrum.within(&used, t);
+            (c.targets, c.weights)
+        }
+    };
+    let skin = file_skin(&model.model.skin(), opts.influences)?;
+    let mut garment = skinned_mesh_asset("garment", &model.garment, None, &skin, GARMENT_COLOR);
+    garment.blend_shapes = targets
+        .iter()
+        .enumerate()
+        .map(|(k, t)| BlendShape {
+            name: format!("psd_{k:03}"),
+            offsets: garment
+                .source_vertex
+                .iter()
+                .map(|&v| t[v as usize])
+                .collect(),
+            normal_offsets: None,
+        })
+        .collect();
+    let mut asset = BakedAsset {
+        skeleton: skeleton_asset(model.skeleton()),
+        meshes: vec![garment],
+        ..Default::default()
+    };
+    if opts.with_body {
+        let body = &model.body;
+        asset.meshes.push(skinned_mesh_asset(
+            "body",
+            &body.mesh,
+            Some(&body.normals),
+            &body.skin,
+            BODY_COLOR,
+        ));
+    }
+    let mut report = BakeReport {
+        targets: targets.len(),
+        used_rank,
+        influences: skin.influences,
+        clips: Vec::new(),
+    };
+    let network_skin = model.model.skin();
+    let mut start = 0;
+    for (clip, x) in clips.iter().zip(&per_clip) {
+        let w = &weights[start..start + x.len()];
+        start += x.len();
+        let mut anim = animation_asset(clip);
+        anim.blend_shape_weights = vec![(0, w.iter().flatten().copied().collect())];
+        asset.animations.push(anim);
+        let network = Replay {
+            shapes: &basis,
+            weights: x,
+            skin: &network_skin,
+        };
+        let baked = Replay {
+            shapes: &targets,
+            weights: w,
+            skin: &skin,
+        };
+        report.clips.push(replay_error(
+            model.skeleton(),
+            &model.garment.positions,
+            clip,
+            &network,
+            &baked,
+        ));
+    }
+    asset
+        .provenance
+        .push(("generator".into(), "garmentbake bake (PBNS)".into()));
+    Ok((asset, report))
+}
+
+/// The skin written to the file: the model's own, or pruned to fewer influences.
+fn file_skin(model_skin: &Skin, influences: Option<usize>) -> Result<Skin> {
+    match influences {
+        None => Ok(model_skin.clone()),
+        Some(k) if k == 0 || k > 8 => bail!("--influences must be between 1 and 8, got {k}"),
+        Some(k) => {
+            let per_vertex: Vec<Vec<(u16, f32)>> = (0..model_skin.vertex_count())
+                .map(|v| model_skin.vertex(v).map(|(j, w)| (j as u16, w)).collect())
+                .collect();
+            Ok(Skin::from_sparse(&per_vertex, k, 0))
+        }
+    }
+}
+
+/// One way of playing the garment: blend shapes with per-frame weights, then a skin.
+struct Replay<'a> {
+    shapes: &'a [Vec<[f32; 3]>],
+    weights: &'a [Vec<f32>],
+    skin: &'a Skin,
+}
+
+impl Replay<'_> {
+    fn frame(
+        &self,
+        rest: &[[f32; 3]],
+        f: usize,
+        skinning: &[nalgebra::Matrix4<f32>],
+    ) -> Vec<[f32; 3]> {
+        self.skin
+            .skin_points(&offset(rest, self.shapes, &self.weights[f]), skinning)
+    }
+}
+
+/// World-space distance between the baked replay and the network, every frame of a clip.
+fn replay_error(
+    skeleton: &crate::rig::Skeleton,
+    rest: &[[f32; 3]],
+    clip: &SkelAnimation,
+    network: &Replay,
+    baked: &Replay,
+) -> ClipError {
+    use rayon::prelude::*;
+    let errors: Vec<(f32, f32)> = (0..clip.frame_count())
+        .into_par_iter()
+        .map(|f| {
+            let skinning = skeleton.skinning_matrices(&clip.local_pose(f));
+            let (net, out) = (
+                network.frame(rest, f, &skinning),
+                baked.frame(rest, f, &skinning),
+            );
+            let d: Vec<f32> = net.iter().zip(&out).map(|(a, b)| dist(a, b)).collect();
+            (
+                d.iter().copied().fold(0.0, f32::max),
+                d.iter().sum::<f32>() / d.len().max(1) as f32,
+            )
+        })
+        .collect();
+    ClipError {
+        clip: clip.name.clone(),
+        frames: clip.frame_count(),
+        max_error_m: errors.iter().map(|e| e.0).fold(0.0, f32::max),
+        mean_error_m: errors.iter().map(|e| e.1).sum::<f32>() / errors.len().max(1) as f32,
+    }
+}
+
+/// `rest + Σ c_k B_k`.
+fn offset(rest: &[[f32; 3]], shapes: &[Vec<[f32; 3]>], c: &[f32]) -> Vec<[f32; 3]> {
+    let mut out = rest.to_vec();
+    for (shape, &ck) in shapes.iter().zip(c) {
+        if ck != 0.0 {
+            for (p, d) in out.iter_mut().zip(shape) {
+                for a in 0..3 {
+                    p[a] += ck * d[a];
+                }
+            }
+        }
+    }
+    out
+}
+
+fn dist(a: &[f32; 3], b: &[f32; 3]) -> f32 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}

@@ -1,0 +1,212 @@
+//! `garmentbake bake` (PBNS → glTF) checked against `garmentbake eval` (the network) by readers we
+//! did not write: the Khronos validator and three.js (every frame of the baked clip), and Blender.
+
+mod common;
+use common::*;
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+/// Small models trained once per test run (1 epoch, width 32) with 4 and 8 influences: enough to
+/// have a non-trivial PSD basis and skin; baking must reproduce whatever the network does.
+fn train(influences: &str) -> PathBuf {
+    let dir = out_dir(&format!("bake_model_{influences}"));
+    let path = dir.join("skirt.safetensors");
+    garmentbake_ok(&[
+        "train",
+        "--body",
+        s("body.glb"),
+        "--garment",
+        s("garments/skirt.obj"),
+        "--motion",
+        s("motions/131_01.bvh"),
+        "--epochs",
+        "1",
+        "--width",
+        "32",
+        "--influences",
+        influences,
+        "--threads",
+        "1",
+        "--seed",
+        "3",
+        "--out",
+        path.to_str().unwrap(),
+    ]);
+    path
+}
+
+thread_local! {
+    static INFLUENCES: std::cell::Cell<u8> = const { std::cell::Cell::new(4) };
+}
+
+fn model() -> &'static PathBuf {
+    static FOUR: OnceLock<PathBuf> = OnceLock::new();
+    static EIGHT: OnceLock<PathBuf> = OnceLock::new();
+    match INFLUENCES.with(|i| i.get()) {
+        8 => EIGHT.get_or_init(|| train("8")),
+        _ => FOUR.get_or_init(|| train("4")),
+    }
+}
+
+fn s(rel: &str) -> &'static str {
+    Box::leak(sample(rel).to_string_lossy().into_owned().into_boxed_str())
+}
+
+/// The network's garment on 131_02 at 30 fps (the reference), and its garment vertex map.
+fn reference(dir: &Path) -> PathBuf {
+    let pc2 = dir.join("ref.pc2");
+    garmentbake_ok(&[
+        "eval",
+        "--model",
+        model().to_str().unwrap(),
+        "--motion",
+        s("motions/131_02.bvh"),
+        "--fps",
+        "30",
+        "--out",
+        pc2.to_str().unwrap(),
+    ]);
+    let file = garmentbake::models::file::load(model(), tch::Device::Cpu).unwrap();
+    let skin = file.model.skin();
+    let mesh =
+        garmentbake::bake::skinned_mesh_asset("garment", &file.garment, None, &skin, [0.0; 3]);
+    std::fs::write(
+        dir.join("map.json"),
+        serde_json::to_string(&mesh.source_vertex).unwrap(),
+    )
+    .unwrap();
+    pc2
+}
+
+fn bake(dir: &Path, name: &str, extra: &[&str]) -> PathBuf {
+    let out = dir.join(name);
+    let mut args = vec![
+        "bake",
+        "--model",
+        model().to_str().unwrap(),
+        "--motion",
+        s("motions/131_02.bvh"),
+        "--fps",
+        "30",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    eprintln!("{}", garmentbake_ok(&args));
+    out
+}
+
+/// three.js replay of every frame against the reference cache: max error in metres.
+fn threejs_max_error(glb: &Path, dir: &Path, frames: usize) -> f64 {
+    let times: Vec<String> = (0..frames)
+        .map(|f| format!("{:.9}", f as f64 / 30.0))
+        .collect();
+    let json = glb.with_extension("three.json");
+    let out = std::process::Command::new("node")
+        .arg(root().join("tools/node/skin_eval.mjs"))
+        .arg(glb)
+        .args(["--times", &times.join(","), "--mesh", "garment", "--pc2"])
+        .arg(dir.join("ref.pc2"))
+        .arg("--pc2-map")
+        .arg(dir.join("map.json"))
+        .arg("--out")
+        .arg(&json)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(json).unwrap()).unwrap();
+    assert_eq!(v["meshes"][0]["frames"].as_array().unwrap().len(), frames);
+    v["meshes"][0]["max_error"].as_f64().unwrap()
+}
+
+const FRAMES_131_02_AT_30: usize = 312;
+
+// three.js (r170) reads JOINTS_0/WEIGHTS_0 only: it plays at most 4 influences, so the
+// independent check of 8-influence files is Blender's (below) and USD's.
+#[test]
+fn full_basis_replays_the_network_in_threejs() {
+    let dir = out_dir("bake_full");
+    reference(&dir);
+    let glb = bake(&dir, "full.glb", &[]);
+    let (ok, report) = khronos_validate(&glb);
+    assert!(ok, "{report}");
+    let err = threejs_max_error(&glb, &dir, FRAMES_131_02_AT_30);
+    eprintln!(
+        "full basis, 4 influences: three.js vs eval, every frame: max {:.4} mm",
+        err * 1e3
+    );
+    assert!(err <= 0.5e-3, "max error {:.4} mm", err * 1e3);
+}
+
+#[test]
+fn compressed_to_a_tolerance_stays_within_it_in_threejs() {
+    let dir = out_dir("bake_tolerance");
+    reference(&dir);
+    let glb = bake(
+        &dir,
+        "tol.glb",
+        &["--influences", "4", "--tolerance-mm", "1"],
+    );
+    let (ok, report) = khronos_validate(&glb);
+    assert!(ok, "{report}");
+    let err = threejs_max_error(&glb, &dir, FRAMES_131_02_AT_30);
+    eprintln!(
+        "--influences 4 --tolerance-mm 1: three.js vs eval, every frame: max {:.4} mm",
+        err * 1e3
+    );
+    assert!(err <= 1e-3, "max error {:.4} mm", err * 1e3);
+}
+
+#[test]
+fn blender_plays_the_baked_garment_with_8_influences() {
+    INFLUENCES.with(|i| i.set(8));
+    let dir = out_dir("bake_blender");
+    let pc2 = reference(&dir);
+    let glb = bake(&dir, "b.glb", &["--influences", "8", "--max-targets", "16"]);
+    let frames = [0, 150, 311];
+    let result = blender_positions(&glb, &frames, 30.0);
+    let (_, cache) = exporters::pc2::read(&std::fs::read(pc2).unwrap()).unwrap();
+    let map: Vec<u32> =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("map.json")).unwrap()).unwrap();
+    let mesh = result["meshes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|m| m["gltf_mesh"] == 0)
+        .expect("garment mesh");
+    assert_eq!(
+        mesh["shape_key_count"], 16,
+        "16 targets (Basis not counted)"
+    );
+    for (i, &f) in frames.iter().enumerate() {
+        let blender = flat_positions(&mesh["frames"][i]["positions"]);
+        let reference: Vec<[f32; 3]> = map.iter().map(|&v| cache[f][v as usize]).collect();
+        let err = max_distance(&blender, &reference);
+        eprintln!("Blender vs eval, frame {f}: max {:.4} mm", err * 1e3);
+        assert!(err < 1e-3, "frame {f}: {:.3} mm", err * 1e3);
+    }
+}
+
+#[test]
+fn bake_is_deterministic_and_never_leaves_a_partial_file() {
+    let dir = out_dir("bake_determinism");
+    let a = bake(&dir, "a.glb", &["--max-targets", "8"]);
+    let b = bake(&dir, "b.glb", &["--max-targets", "8"]);
+    assert_eq!(std::fs::read(a).unwrap(), std::fs::read(b).unwrap());
+    let out = garmentbake(&[
+        "bake",
+        "--model",
+        model().to_str().unwrap(),
+        "--motion",
+        s("motions/131_02.bvh"),
+        "--out",
+        "/nonexistent-dir/x.glb",
+    ]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent-dir/x.glb"));
+}
