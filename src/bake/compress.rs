@@ -49,9 +49,8 @@ pub fn spectrum(used: &UsedOffsets) -> Spectrum {
     let mut order: Vec<usize> = (0..svd.singular_values.len()).collect();
     order.sort_by(|&a, &b| svd.singular_values[b].total_cmp(&svd.singular_values[a]));
     let sv: Vec<f64> = order.iter().map(|&i| svd.singular_values[i]).collect();
-    let directions = DMatrix::from_fn(n3, order.len(), |row, c| {
-        (q.row(row) * v_t.row(order[c]).transpose())[0]
-    });
+    let unordered = q * v_t.transpose();
+    let directions = DMatrix::from_fn(n3, order.len(), |row, c| unordered[(row, order[c])]);
     let coefficients = DMatrix::from_fn(u.nrows(), order.len(), |f, c| u[(f, order[c])] * sv[c]);
     Spectrum {
         directions,
@@ -109,30 +108,32 @@ impl Spectrum {
     }
 }
 
+/// Rest-space offsets `Σ_k c_fk S_k` of every frame as a 3N × frames matrix, one contiguous
+/// column per frame (one matrix product instead of a loop per frame and vertex: the bake's hot
+/// spot).
+pub fn offset_matrix(shapes: &[Vec<[f32; 3]>], coefficients: &[Vec<f32>]) -> DMatrix<f32> {
+    let n3 = shapes.first().map_or(0, |s| s.len() * 3);
+    let s = DMatrix::from_fn(n3, shapes.len(), |r, k| shapes[k][r / 3][r % 3]);
+    let c = DMatrix::from_fn(shapes.len(), coefficients.len(), |k, f| coefficients[f][k]);
+    s * c
+}
+
 /// Max and mean per-vertex distance between the network's offsets and the compressed ones.
 fn errors(used: &UsedOffsets, targets: &[Vec<[f32; 3]>], weights: &[Vec<f32>]) -> (f32, f32) {
-    let n = used.basis.first().map_or(0, Vec::len);
-    let (mut max, mut sum, mut count) = (0.0f64, 0.0f64, 0usize);
-    for (x, w) in used.coefficients.iter().zip(weights) {
-        for v in 0..n {
-            let mut d = [0.0f64; 3];
-            for (k, basis) in used.basis.iter().enumerate() {
-                for a in 0..3 {
-                    d[a] += x[k] as f64 * basis[v][a] as f64;
-                }
-            }
-            for (t, target) in targets.iter().enumerate() {
-                for a in 0..3 {
-                    d[a] -= w[t] as f64 * target[v][a] as f64;
-                }
-            }
-            let e = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    let mut residual = offset_matrix(used.basis, used.coefficients);
+    if !targets.is_empty() {
+        residual -= offset_matrix(targets, weights);
+    }
+    let (mut max, mut sum, mut count) = (0.0f32, 0.0f64, 0usize);
+    for column in residual.column_iter() {
+        for v in column.as_slice().chunks_exact(3) {
+            let e = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
             max = max.max(e);
-            sum += e;
+            sum += e as f64;
             count += 1;
         }
     }
-    (max as f32, (sum / count.max(1) as f64) as f32)
+    (max, (sum / count.max(1) as f64) as f32)
 }
 
 #[cfg(test)]

@@ -2,7 +2,7 @@
 //! `LBS(T + Σ w_k B_k, θ, W)` exactly like the network, with `B` the (compressed) basis and `w`
 //! the MLP output projected on it, one weight track per clip.
 
-use super::compress::{spectrum, UsedOffsets};
+use super::compress::{offset_matrix, spectrum, UsedOffsets};
 use super::{animation_asset, skeleton_asset, skinned_mesh_asset, BODY_COLOR};
 use crate::models::file::ModelFile;
 use crate::models::pbns::flat;
@@ -156,16 +156,8 @@ pub fn bake(
         let mut anim = animation_asset(clip);
         anim.blend_shape_weights = vec![(0, w.iter().flatten().copied().collect())];
         asset.animations.push(anim);
-        let network = Replay {
-            shapes: &basis,
-            weights: x,
-            skin: &network_skin,
-        };
-        let baked = Replay {
-            shapes: &targets,
-            weights: w,
-            skin: &skin,
-        };
+        let network = Replay::new(&basis, x, &network_skin);
+        let baked = Replay::new(&targets, w, &skin);
         report.clips.push(replay_error(
             model.skeleton(),
             &model.garment.positions,
@@ -194,22 +186,33 @@ fn file_skin(model_skin: &Skin, influences: Option<usize>) -> Result<Skin> {
     }
 }
 
-/// One way of playing the garment: blend shapes with per-frame weights, then a skin.
+/// One way of playing the garment: rest-space offsets per frame (3N × frames), then a skin.
 struct Replay<'a> {
-    shapes: &'a [Vec<[f32; 3]>],
-    weights: &'a [Vec<f32>],
+    offsets: nalgebra::DMatrix<f32>,
     skin: &'a Skin,
 }
 
-impl Replay<'_> {
+impl<'a> Replay<'a> {
+    fn new(shapes: &[Vec<[f32; 3]>], weights: &[Vec<f32>], skin: &'a Skin) -> Self {
+        Replay {
+            offsets: offset_matrix(shapes, weights),
+            skin,
+        }
+    }
+
     fn frame(
         &self,
         rest: &[[f32; 3]],
         f: usize,
         skinning: &[nalgebra::Matrix4<f32>],
     ) -> Vec<[f32; 3]> {
-        self.skin
-            .skin_points(&offset(rest, self.shapes, &self.weights[f]), skinning)
+        let column = self.offsets.column(f);
+        let moved: Vec<[f32; 3]> = rest
+            .iter()
+            .zip(column.as_slice().chunks_exact(3))
+            .map(|(p, d)| [p[0] + d[0], p[1] + d[1], p[2] + d[2]])
+            .collect();
+        self.skin.skin_points(&moved, skinning)
     }
 }
 
@@ -243,21 +246,6 @@ fn replay_error(
         max_error_m: errors.iter().map(|e| e.0).fold(0.0, f32::max),
         mean_error_m: errors.iter().map(|e| e.1).sum::<f32>() / errors.len().max(1) as f32,
     }
-}
-
-/// `rest + Σ c_k B_k`.
-fn offset(rest: &[[f32; 3]], shapes: &[Vec<[f32; 3]>], c: &[f32]) -> Vec<[f32; 3]> {
-    let mut out = rest.to_vec();
-    for (shape, &ck) in shapes.iter().zip(c) {
-        if ck != 0.0 {
-            for (p, d) in out.iter_mut().zip(shape) {
-                for a in 0..3 {
-                    p[a] += ck * d[a];
-                }
-            }
-        }
-    }
-    out
 }
 
 fn dist(a: &[f32; 3], b: &[f32; 3]) -> f32 {
