@@ -163,6 +163,26 @@ fn compressed_to_a_tolerance_stays_within_it_in_threejs() {
 }
 
 #[test]
+fn pruning_8_influences_to_4_is_compensated_within_the_tolerance_in_threejs() {
+    INFLUENCES.with(|i| i.set(8));
+    let dir = out_dir("bake_pruned");
+    reference(&dir);
+    let glb = bake(
+        &dir,
+        "pruned.glb",
+        &["--influences", "4", "--tolerance-mm", "1"],
+    );
+    let (ok, report) = khronos_validate(&glb);
+    assert!(ok, "{report}");
+    let err = threejs_max_error(&glb, &dir, FRAMES_131_02_AT_30);
+    eprintln!(
+        "8 → 4 influences, --tolerance-mm 1: three.js vs eval, every frame: max {:.4} mm",
+        err * 1e3
+    );
+    assert!(err <= 1e-3, "max error {:.4} mm", err * 1e3);
+}
+
+#[test]
 fn blender_plays_the_baked_garment_with_8_influences() {
     INFLUENCES.with(|i| i.set(8));
     let dir = out_dir("bake_blender");

@@ -59,13 +59,37 @@ pub fn spectrum(used: &UsedOffsets) -> Spectrum {
     }
 }
 
+/// Singular directions of explicit offsets (3N × frames), through libtorch's SVD: used when the
+/// offsets are not a product of a small basis (e.g. with skinning correctives added).
+pub fn spectrum_of(offsets: &DMatrix<f32>) -> Spectrum {
+    let (rows, cols) = offsets.shape();
+    // nalgebra is column-major: the buffer read row-major is the transpose (frames × 3N).
+    let t = tch::Tensor::from_slice(offsets.as_slice())
+        .view([cols as i64, rows as i64])
+        .to_kind(tch::Kind::Double);
+    let (u, s, v) = t.svd(true, true);
+    let sv: Vec<f64> = Vec::<f64>::try_from(&s).expect("singular values");
+    let k = sv.len();
+    let u: Vec<f64> = Vec::<f64>::try_from(&u.contiguous().view([-1])).expect("U");
+    let v: Vec<f64> = Vec::<f64>::try_from(&v.contiguous().view([-1])).expect("V");
+    // frames × 3N = U S Vᵀ: directions are the columns of V, coefficients U S (sorted by libtorch).
+    let directions = DMatrix::from_fn(rows, k, |r, c| v[r * k + c]);
+    let coefficients = DMatrix::from_fn(cols, k, |f, c| u[f * k + c] * sv[c]);
+    Spectrum {
+        directions,
+        coefficients,
+        singular_values: sv,
+    }
+}
+
 impl Spectrum {
     pub fn rank(&self) -> usize {
         self.singular_values.len()
     }
 
-    /// Keeps the `count` strongest directions; errors measured against the full used offsets.
-    pub fn truncate(&self, used: &UsedOffsets, count: usize) -> Compressed {
+    /// Keeps the `count` strongest directions; errors measured against `reference`, the offsets
+    /// to reproduce (3N × frames, see [`offset_matrix`]).
+    pub fn truncate(&self, reference: &DMatrix<f32>, count: usize) -> Compressed {
         let count = count.min(self.rank());
         let n = self.directions.nrows() / 3;
         let targets = (0..count)
@@ -82,7 +106,7 @@ impl Spectrum {
                     .collect()
             })
             .collect();
-        let (max_error, mean_error) = errors(used, &targets, &weights);
+        let (max_error, mean_error) = errors(reference, &targets, &weights);
         Compressed {
             targets,
             weights,
@@ -92,19 +116,19 @@ impl Spectrum {
     }
 
     /// The smallest count whose max error is within `tolerance` (m); the full rank otherwise.
-    pub fn within(&self, used: &UsedOffsets, tolerance: f32) -> Compressed {
+    pub fn within(&self, reference: &DMatrix<f32>, tolerance: f32) -> Compressed {
         let mut lo = 0;
         let mut hi = self.rank();
         // Error falls as targets are added; bisect on the count.
         while lo < hi {
             let mid = (lo + hi) / 2;
-            if self.truncate(used, mid).max_error <= tolerance {
+            if self.truncate(reference, mid).max_error <= tolerance {
                 hi = mid;
             } else {
                 lo = mid + 1;
             }
         }
-        self.truncate(used, lo)
+        self.truncate(reference, lo)
     }
 }
 
@@ -119,8 +143,8 @@ pub fn offset_matrix(shapes: &[Vec<[f32; 3]>], coefficients: &[Vec<f32>]) -> DMa
 }
 
 /// Max and mean per-vertex distance between the network's offsets and the compressed ones.
-fn errors(used: &UsedOffsets, targets: &[Vec<[f32; 3]>], weights: &[Vec<f32>]) -> (f32, f32) {
-    let mut residual = offset_matrix(used.basis, used.coefficients);
+fn errors(reference: &DMatrix<f32>, targets: &[Vec<[f32; 3]>], weights: &[Vec<f32>]) -> (f32, f32) {
+    let mut residual = reference.clone();
     if !targets.is_empty() {
         residual -= offset_matrix(targets, weights);
     }
@@ -178,20 +202,22 @@ mod tests {
             basis: &basis,
             coefficients: &coefficients,
         };
-        let s = spectrum(&used);
-        assert!(
-            s.singular_values[2] < 1e-9 * s.singular_values[0],
-            "{:?}",
-            s.singular_values
-        );
-        let two = s.truncate(&used, 2);
-        assert!(two.max_error < 1e-6, "{}", two.max_error);
-        let one = s.truncate(&used, 1);
-        assert!(
-            one.max_error > 1e-4,
-            "one direction cannot explain a rank-2 set"
-        );
-        let picked = s.within(&used, 1e-6);
-        assert_eq!(picked.targets.len(), 2);
+        let reference = offset_matrix(&basis, &coefficients);
+        for s in [spectrum(&used), spectrum_of(&reference)] {
+            assert!(
+                s.singular_values[2] < 1e-6 * s.singular_values[0],
+                "{:?}",
+                s.singular_values
+            );
+            let two = s.truncate(&reference, 2);
+            assert!(two.max_error < 1e-6, "{}", two.max_error);
+            let one = s.truncate(&reference, 1);
+            assert!(
+                one.max_error > 1e-4,
+                "one direction cannot explain a rank-2 set"
+            );
+            let picked = s.within(&reference, 1e-6);
+            assert_eq!(picked.targets.len(), 2);
+        }
     }
 }

@@ -2,7 +2,7 @@
 //! `LBS(T + Σ w_k B_k, θ, W)` exactly like the network, with `B` the (compressed) basis and `w`
 //! the MLP output projected on it, one weight track per clip.
 
-use super::compress::{offset_matrix, spectrum, UsedOffsets};
+use super::compress::{offset_matrix, spectrum, spectrum_of, UsedOffsets};
 use super::{animation_asset, skeleton_asset, skinned_mesh_asset, BODY_COLOR};
 use crate::models::file::ModelFile;
 use crate::models::pbns::flat;
@@ -48,6 +48,9 @@ pub struct ClipError {
     pub frames: usize,
     pub max_error_m: f32,
     pub mean_error_m: f32,
+    /// With fewer influences than the network: the max error pruning alone would cost (before
+    /// the corrective blend shapes compensate it).
+    pub pruning_error_m: Option<f32>,
 }
 
 /// Network coefficients `X` for every frame of a clip, `[frame][k]`.
@@ -94,7 +97,19 @@ pub fn bake(
         basis: &basis,
         coefficients: &all,
     };
-    let spectrum = spectrum(&used);
+    let network_skin = model.model.skin();
+    let skin = file_skin(&network_skin, opts.influences)?;
+    let mut reference = offset_matrix(&basis, &all);
+    let pruned = skin.influences < network_skin.influences;
+    if pruned {
+        add_skin_correctives(&mut reference, model, clips, &network_skin, &skin);
+    }
+    // Without correctives the offsets are X·D: the fast small-basis SVD applies.
+    let spectrum = if pruned {
+        spectrum_of(&reference)
+    } else {
+        spectrum(&used)
+    };
     let top = spectrum.singular_values.first().copied().unwrap_or(0.0);
     let used_rank = spectrum
         .singular_values
@@ -102,17 +117,20 @@ pub fn bake(
         .filter(|&&s| s > 1e-6 * top)
         .count();
     let (targets, weights) = match opts.targets {
-        Targets::Full => (basis.clone(), all.clone()),
+        Targets::Full if !pruned => (basis.clone(), all.clone()),
+        Targets::Full => {
+            let c = spectrum.truncate(&reference, used_rank);
+            (c.targets, c.weights)
+        }
         Targets::Count(k) => {
-            let c = spectrum.truncate(&used, k);
+            let c = spectrum.truncate(&reference, k);
             (c.targets, c.weights)
         }
         Targets::Tolerance(t) => {
-            let c = spectrum.within(&used, t);
+            let c = spectrum.within(&reference, t);
             (c.targets, c.weights)
         }
     };
-    let skin = file_skin(&model.model.skin(), opts.influences)?;
     let mut garment = skinned_mesh_asset("garment", &model.garment, None, &skin, GARMENT_COLOR);
     garment.blend_shapes = targets
         .iter()
@@ -148,7 +166,6 @@ pub fn bake(
         influences: skin.influences,
         clips: Vec::new(),
     };
-    let network_skin = model.model.skin();
     let mut start = 0;
     for (clip, x) in clips.iter().zip(&per_clip) {
         let w = &weights[start..start + x.len()];
@@ -158,13 +175,26 @@ pub fn bake(
         asset.animations.push(anim);
         let network = Replay::new(&basis, x, &network_skin);
         let baked = Replay::new(&targets, w, &skin);
-        report.clips.push(replay_error(
+        let pruning = pruned.then(|| {
+            let uncorrected = Replay::new(&basis, x, &skin);
+            replay_error(
+                model.skeleton(),
+                &model.garment.positions,
+                clip,
+                &network,
+                &uncorrected,
+            )
+            .max_error_m
+        });
+        let mut error = replay_error(
             model.skeleton(),
             &model.garment.positions,
             clip,
             &network,
             &baked,
-        ));
+        );
+        error.pruning_error_m = pruning;
+        report.clips.push(error);
     }
     asset
         .provenance
@@ -183,6 +213,57 @@ fn file_skin(model_skin: &Skin, influences: Option<usize>) -> Result<Skin> {
                 .collect();
             Ok(Skin::from_sparse(&per_vertex, k, 0))
         }
+    }
+}
+
+/// Skinning correctives: with fewer influences than the network, the rest-space offsets that make
+/// the pruned skin land exactly where the full skin puts the garment, per frame:
+/// `x' = A⁻¹ (p − b)` with `A`, `b` the pruned skin's blended matrix; added to `offsets`
+/// (3N × frames, clips in order) so the compression learns them as extra blend-shape content.
+fn add_skin_correctives(
+    offsets: &mut nalgebra::DMatrix<f32>,
+    model: &ModelFile,
+    clips: &[SkelAnimation],
+    full: &Skin,
+    pruned: &Skin,
+) {
+    use nalgebra::{Point3, Vector3};
+    use rayon::prelude::*;
+    let rest = &model.garment.positions;
+    let poses: Vec<_> = clips
+        .iter()
+        .flat_map(|c| (0..c.frame_count()).map(move |f| c.local_pose(f)))
+        .collect();
+    let skeleton = model.skeleton();
+    let columns: Vec<Vec<f32>> = poses
+        .par_iter()
+        .enumerate()
+        .map(|(f, pose)| {
+            let skinning = skeleton.skinning_matrices(pose);
+            let column = offsets.column(f);
+            let mut out = column.as_slice().to_vec();
+            for (v, p) in rest.iter().enumerate() {
+                let x = Point3::new(
+                    p[0] + out[3 * v],
+                    p[1] + out[3 * v + 1],
+                    p[2] + out[3 * v + 2],
+                );
+                let target = full.blended(v, &skinning).transform_point(&x);
+                let m = pruned.blended(v, &skinning);
+                let a = m.fixed_view::<3, 3>(0, 0).into_owned();
+                let b: Vector3<f32> = m.fixed_view::<3, 1>(0, 3).into_owned();
+                if let Some(inv) = a.try_inverse() {
+                    let fixed = inv * (target.coords - b);
+                    for axis in 0..3 {
+                        out[3 * v + axis] = fixed[axis] - p[axis];
+                    }
+                }
+            }
+            out
+        })
+        .collect();
+    for (f, column) in columns.into_iter().enumerate() {
+        offsets.column_mut(f).copy_from_slice(&column);
     }
 }
 
@@ -245,6 +326,7 @@ fn replay_error(
         frames: clip.frame_count(),
         max_error_m: errors.iter().map(|e| e.0).fold(0.0, f32::max),
         mean_error_m: errors.iter().map(|e| e.1).sum::<f32>() / errors.len().max(1) as f32,
+        pruning_error_m: None,
     }
 }
 

@@ -88,6 +88,9 @@ pub fn run(args: Args) -> Result<i32> {
         report.targets, report.used_rank, report.influences
     );
     for c in &report.clips {
+        if let Some(p) = c.pruning_error_m {
+            println!("{}: pruning the skin to {} influences alone would cost {:.3} mm; corrective blend shapes compensate", c.clip, report.influences, p * 1e3);
+        }
         println!(
             "{}: {} frames, replay error vs network: max {:.3} mm, mean {:.4} mm",
             c.clip,

@@ -123,7 +123,7 @@ impl Skin {
     }
 
     /// Blended skinning matrix of vertex `v`.
-    fn blended(&self, v: usize, skinning: &[Matrix4<f32>]) -> Matrix4<f32> {
+    pub fn blended(&self, v: usize, skinning: &[Matrix4<f32>]) -> Matrix4<f32> {
         let mut m = Matrix4::zeros();
         for (j, w) in self.vertex(v) {
             if w != 0.0 {
