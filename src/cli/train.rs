@@ -93,6 +93,13 @@ pub struct InputArgs {
     /// Learning rate of the blend-weight logits relative to --lr.
     #[arg(long, default_value_t = 10.0)]
     pub weights_lr_scale: f64,
+    /// Initial blend weights: copy the body's within this distance (metres) of it at rest and
+    /// interpolate them smoothly over the garment beyond (a skirt's hanging part).
+    #[arg(long, default_value_t = 0.02)]
+    pub inpaint_beyond: f32,
+    /// Copy the body's weights by proximity everywhere (no inpainting).
+    #[arg(long)]
+    pub no_inpaint: bool,
     /// CPU threads (torch and the nearest-neighbour queries).
     #[arg(long, default_value_t = 2)]
     pub threads: usize,
@@ -128,6 +135,7 @@ impl InputArgs {
             refresh_every: self.refresh_every,
             candidates: self.candidates.max(1),
             weights_lr_scale: self.weights_lr_scale,
+            inpaint_beyond: (!self.no_inpaint).then_some(self.inpaint_beyond),
             device: parse_device(&self.device)?,
             ..Settings::default()
         };
@@ -238,6 +246,15 @@ pub fn run(args: Args) -> Result<i32> {
             trainer.settings.pose_threshold,
             names.join(", ")
         );
+        let t = &trainer.file.info.training;
+        if t.inpainted > 0 {
+            println!(
+                "initial weights: {} of {} vertices hang farther than {} m from the body: inpainted",
+                t.inpainted,
+                trainer.model().shape.vertices,
+                t.inpaint_beyond.unwrap_or_default()
+            );
+        }
         if trainer.epoch() > 0 {
             println!("resuming after epoch {}", trainer.epoch());
         }

@@ -91,6 +91,10 @@ pub struct TrainingInfo {
     pub pose_threshold: f32,
     pub poses_train: usize,
     pub poses_validation: usize,
+    /// Initial weights were inpainted beyond this distance from the body (metres).
+    pub inpaint_beyond: Option<f32>,
+    /// Vertices whose initial weights were inpainted.
+    pub inpainted: usize,
 }
 
 /// One epoch of the metric history.

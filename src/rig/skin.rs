@@ -1,7 +1,6 @@
 //! Linear blend skinning with a fixed number of influences per vertex (UsdSkel jointIndices /
 //! jointWeights, vertex-major), and the top-k pruning that keeps skins playable in engines.
 
-use crate::geometry::PointIndex;
 use nalgebra::{Matrix4, Point3, Vector3};
 
 #[derive(Clone, Debug, PartialEq)]
@@ -80,36 +79,19 @@ impl Skin {
             .map(|(&j, &w)| (j as usize, w))
     }
 
-    /// Weights for `points` by proximity to a skinned surface: the inverse-distance average of
-    /// the skins of the `neighbours` nearest surface points, pruned to `influences`. Averaging
-    /// several points matters: copying the single nearest body vertex tears a skirt between the
-    /// legs (neighbouring garment vertices jump between the two thighs).
-    pub fn transfer(
-        points: &[[f32; 3]],
-        surface: &Skin,
-        index: &PointIndex,
-        neighbours: usize,
-        influences: usize,
-    ) -> Skin {
-        // Keeps the weights finite for a point exactly on the surface.
-        const SOFTEN: f32 = 1.0e-3;
-        let per_vertex: Vec<Vec<(u16, f32)>> = points
+    /// Dense `[vertex][joint]` weights pruned to the `influences` largest per vertex.
+    pub fn from_dense(weights: &[Vec<f32>], influences: usize) -> Skin {
+        let sparse: Vec<Vec<(u16, f32)>> = weights
             .iter()
-            .map(|&p| {
-                let mut sum: Vec<(u16, f32)> = Vec::new();
-                for (b, d) in index.k_nearest(p, neighbours) {
-                    let s = 1.0 / (d + SOFTEN);
-                    for (j, w) in surface.vertex(b as usize) {
-                        match sum.iter_mut().find(|(k, _)| *k as usize == j) {
-                            Some(e) => e.1 += s * w,
-                            None => sum.push((j as u16, s * w)),
-                        }
-                    }
-                }
-                sum
+            .map(|w| {
+                w.iter()
+                    .enumerate()
+                    .filter(|(_, &x)| x > 0.0)
+                    .map(|(j, &x)| (j as u16, x))
+                    .collect()
             })
             .collect();
-        Skin::from_sparse(&per_vertex, influences, 0)
+        Skin::from_sparse(&sparse, influences, 0)
     }
 
     /// Blended skinning matrix of vertex `v`.

@@ -16,7 +16,7 @@ use crate::models::file::{
 use crate::models::pbns::flat;
 use crate::models::pose_features::{feature_count, feature_joints, tensor_points, PoseBatch};
 use crate::models::{Pbns, PbnsShape};
-use crate::rig::{SkelAnimation, Skin};
+use crate::rig::{weights, SkelAnimation};
 use anyhow::{bail, Result};
 use fabric::Fabric;
 use losses::{Cloth, TERM_NAMES};
@@ -53,6 +53,8 @@ pub struct Settings {
     pub device: Device,
     /// Learning rate of the skin logits relative to the network's.
     pub weights_lr_scale: f64,
+    /// Garment vertices farther than this from the body at rest get inpainted weights.
+    pub inpaint_beyond: Option<f32>,
 }
 
 impl Default for Settings {
@@ -76,6 +78,7 @@ impl Default for Settings {
             reach: 0.3,
             device: Device::Cpu,
             weights_lr_scale: 10.0,
+            inpaint_beyond: Some(0.02),
         }
     }
 }
@@ -165,7 +168,15 @@ impl Trainer {
         let device = settings.device;
         let rest = &garment.mesh.positions;
         let body_index = crate::geometry::PointIndex::new(&body.mesh.positions)?;
-        let lbs = Skin::transfer(rest, &body.skin, &body_index, settings.neighbours, settings.influences);
+        let (lbs, inpainted) = weights::garment_skin(
+            &garment.mesh,
+            &body.skin,
+            body.skeleton.joint_count(),
+            &body_index,
+            settings.neighbours,
+            settings.influences,
+            settings.inpaint_beyond,
+        );
         let joints = poses::garment_joints(&body.skeleton, &lbs, settings.joint_share);
         let poses = poses::pose_set(
             &clips,
@@ -240,6 +251,8 @@ impl Trainer {
                 pose_threshold: settings.pose_threshold,
                 poses_train: poses.train.len(),
                 poses_validation: poses.validation.len(),
+                inpaint_beyond: settings.inpaint_beyond,
+                inpainted,
             },
             history: Vec::new(),
         };
