@@ -51,7 +51,7 @@ pub struct SkeletonInfo {
     pub rest_rotations: Vec<[f32; 4]>,
     /// Column-major 4×4.
     pub inverse_bind_matrices: Vec<[f32; 16]>,
-    /// Joints whose rotations feed the MLP (6 values each).
+    /// Joints whose rotations feed the MLP (6 values each): those that move the garment.
     pub feature_joints: Vec<usize>,
 }
 
@@ -200,8 +200,17 @@ pub fn load(path: &Path, device: Device) -> Result<ModelFile> {
         }
         Ok(t)
     };
+    let joints = &info.skeleton.feature_joints;
+    if shape.features != 6 * joints.len() || joints.iter().any(|&j| j >= shape.joints) {
+        return Err(fail(format!(
+            "{} MLP inputs do not match the {} feature joints",
+            shape.features,
+            joints.len()
+        )));
+    }
     let model = Pbns {
         shape,
+        feature_joints: joints.clone(),
         mlp,
         psd: expect(tensor(&get("psd")?, device)?, &[shape.width, 3 * n], "psd")?,
         template: expect(tensor(&get("garment.rest")?, device)?, &[n, 3], "garment.rest")?,

@@ -14,7 +14,7 @@ use crate::models::file::{
     TrainingInfo, UvInfo, FORMAT, VERSION,
 };
 use crate::models::pbns::flat;
-use crate::models::pose_features::{feature_count, feature_joints, tensor_points, PoseBatch};
+use crate::models::pose_features::{tensor_points, PoseBatch, PER_JOINT};
 use crate::models::{Pbns, PbnsShape};
 use crate::rig::{weights, SkelAnimation};
 use anyhow::{bail, Result};
@@ -193,14 +193,14 @@ impl Trainer {
             );
         }
         let shape = PbnsShape {
-            features: feature_count(&body.skeleton),
+            features: PER_JOINT * poses.joints.len(),
             width: settings.width,
             layers: settings.layers,
             vertices: rest.len(),
             joints: body.skeleton.joint_count(),
             influences: settings.influences,
         };
-        let mut model = Pbns::new(shape, rest, &lbs, &body.skeleton, device);
+        let mut model = Pbns::new(shape, poses.joints.clone(), rest, &lbs, &body.skeleton, device);
         model.set_trainable(settings.train_weights);
         let pinned_list = fabric.pinned.clone().unwrap_or_else(|| garment.sidecar.pinned.clone());
         if let Some(bad) = pinned_list.iter().find(|&&v| v as usize >= rest.len()) {
@@ -223,7 +223,7 @@ impl Trainer {
             format: FORMAT.into(),
             version: VERSION,
             shape,
-            skeleton: SkeletonInfo::new(&body.skeleton, feature_joints(&body.skeleton)),
+            skeleton: SkeletonInfo::new(&body.skeleton, poses.joints.clone()),
             garment: GarmentInfo {
                 name: garment.name.clone(),
                 vertices: rest.len(),
@@ -260,8 +260,8 @@ impl Trainer {
         let pinned = Tensor::from_slice(&pinned_list.iter().map(|&v| v as i64).collect::<Vec<_>>())
             .to_device(device);
         Ok(Trainer {
-            train: PoseBatch::new(&body.skeleton, &train_locals, device),
-            validation: PoseBatch::new(&body.skeleton, &validation_locals, device),
+            train: model.batch(&body.skeleton, &train_locals, device),
+            validation: model.batch(&body.skeleton, &validation_locals, device),
             validation_bodies: PosedBody::many(&body, &validation_locals),
             geometry: ClothGeometry::new(&garment.mesh, fabric.density),
             file: ModelFile {
