@@ -25,6 +25,9 @@ use poses::PoseSet;
 use std::time::{Duration, Instant};
 use tch::{Device, Kind, Tensor};
 
+/// Body vertices this close to the garment at rest (metres) are the parts it can touch.
+const TOUCH: f32 = 0.05;
+
 /// Training settings (the CLI's options).
 #[derive(Clone, Debug)]
 pub struct Settings {
@@ -135,7 +138,6 @@ pub struct Trainer {
     validation_bodies: Vec<PosedBody>,
     geometry: ClothGeometry,
     adam: Adam,
-    pinned: Tensor,
     refreshed: bool,
     /// A candidate refresh running on a worker thread, applied at the next epoch.
     pending: Option<std::thread::JoinHandle<Vec<i64>>>,
@@ -177,7 +179,13 @@ impl Trainer {
             settings.influences,
             settings.inpaint_beyond,
         );
-        let joints = poses::garment_joints(&body.skeleton, &lbs, settings.joint_share);
+        // Joints that move the garment, or the body parts it can touch (a long skirt's hem
+        // meets the feet, whose weights are not on the skirt).
+        let touched = body.skin.subset(&nearest::body_subset(&body, rest, TOUCH));
+        let mut joints = poses::moving_joints(&body.skeleton, &lbs, settings.joint_share);
+        joints.extend(poses::moving_joints(&body.skeleton, &touched, 0.5 * settings.joint_share));
+        joints.sort_unstable();
+        joints.dedup();
         let poses = poses::pose_set(
             &clips,
             joints,
@@ -257,8 +265,6 @@ impl Trainer {
             history: Vec::new(),
         };
         let adam = Adam::new(&model.parameters(settings.train_weights));
-        let pinned = Tensor::from_slice(&pinned_list.iter().map(|&v| v as i64).collect::<Vec<_>>())
-            .to_device(device);
         Ok(Trainer {
             train: model.batch(&body.skeleton, &train_locals, device),
             validation: model.batch(&body.skeleton, &validation_locals, device),
@@ -278,7 +284,6 @@ impl Trainer {
             cloth,
             correspondences,
             adam,
-            pinned,
             refreshed: false,
             pending: None,
         })
@@ -399,11 +404,6 @@ impl Trainer {
             });
         }
         loss.backward();
-        if self.settings.train_weights && self.pinned.numel() > 0 {
-            // Pinned vertices keep their proximity weights (they are held at the skinned rest).
-            let mut g = self.file.model.logits.grad();
-            let _ = g.index_fill_(0, &self.pinned, 0.0);
-        }
         let named = self.model().parameters(self.settings.train_weights);
         // The skin logits move on another scale than the network (a weight going from 1e-4 to
         // 0.5 is a logit change of ~9): they get a larger learning rate.
