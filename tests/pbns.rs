@@ -384,3 +384,56 @@ fn model_with_another_skeleton_is_a_clear_error() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("skeleton differs"));
 }
+
+fn tiny_train_cli(out: &Path, extra: &[&str]) -> std::process::Output {
+    gb().args(["train", "--threads", "1", "--width", "16", "--pose-threshold", "0.8"])
+        .arg("--body")
+        .arg(sample("body.glb"))
+        .arg("--garment")
+        .arg(sample("garments/top.obj"))
+        .arg("--motion")
+        .arg(sample("motions/131_01.bvh"))
+        .arg("--out")
+        .arg(out)
+        .args(extra)
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn resume_continues_from_the_checkpoint_and_inspect_prints_the_model() {
+    let out = tmp("resume.safetensors");
+    let r = tiny_train_cli(&out, &["--epochs", "1"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert!(tmp("resume.ckpt.safetensors").exists());
+    let r = tiny_train_cli(&out, &["--epochs", "2", "--resume"]);
+    let text = String::from_utf8_lossy(&r.stdout);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert!(text.contains("resuming after epoch 1"), "{text}");
+    let r = gb().arg("inspect").arg(&out).arg("--json").output().unwrap();
+    assert!(r.status.success());
+    let v: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+    let d = &v["description"];
+    assert_eq!(d["history"].as_array().unwrap().len(), 2);
+    assert_eq!(d["garment"]["faces"].as_array().unwrap().len(), 1888);
+    assert_eq!(d["skeleton"]["joint_names"][0], "Hips");
+    let r = gb().arg("inspect").arg(&out).output().unwrap();
+    let text = String::from_utf8_lossy(&r.stdout);
+    assert!(text.contains("feature_joints") && text.contains("LeftArm"), "{text}");
+    // Resuming with other settings is refused.
+    let r = tiny_train_cli(&out, &["--epochs", "3", "--resume", "--seed", "9"]);
+    assert_eq!(r.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&r.stderr).contains("checkpoint was made with other inputs"));
+}
+
+#[test]
+fn a_blown_up_loss_stops_and_names_the_term() {
+    let fabric = tmp("explosive.toml");
+    std::fs::write(&fabric, "name = \"explosive\"\nedge = 3.0e38\nbend = 1.0e-3\ndensity = 0.15\n").unwrap();
+    let out = tmp("nan.safetensors");
+    let r = tiny_train_cli(&out, &["--epochs", "2", "--config", fabric.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert_eq!(r.status.code(), Some(2), "{err}");
+    assert!(err.contains("the edge term blew up") && err.contains("no epoch finished"), "{err}");
+    assert!(!out.exists());
+}

@@ -106,8 +106,8 @@ pub struct EpochRecord {
     pub terms: [f64; 5],
     /// Training-step metrics (candidate nearest neighbours).
     pub train: Metrics,
-    /// Exact metrics on the validation poses.
-    pub validation: Metrics,
+    /// Exact metrics on the validation poses (every few epochs, and the last).
+    pub validation: Option<Metrics>,
 }
 
 /// Everything a model file holds.

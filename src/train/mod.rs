@@ -56,6 +56,8 @@ pub struct Settings {
     pub device: Device,
     /// Learning rate of the skin logits relative to the network's.
     pub weights_lr_scale: f64,
+    /// Epochs between validation passes (the last epoch is always validated).
+    pub validate_every: usize,
     /// Garment vertices farther than this from the body at rest get inpainted weights.
     pub inpaint_beyond: Option<f32>,
 }
@@ -81,6 +83,7 @@ impl Default for Settings {
             reach: 0.3,
             device: Device::Cpu,
             weights_lr_scale: 10.0,
+            validate_every: 5,
             inpaint_beyond: Some(0.02),
         }
     }
@@ -108,6 +111,8 @@ pub struct PhaseTimes {
     pub refresh: Duration,
     pub steps: usize,
     pub poses: usize,
+    /// Validation passes (not part of the step time).
+    pub validation: Duration,
 }
 
 impl PhaseTimes {
@@ -455,17 +460,25 @@ impl Trainer {
                 collided_pct: 100.0 * m[7],
                 gravity_j: m[8],
             },
-            validation: self.validate(),
+            validation: self.validation_due(epoch + 1).then(|| self.validate()),
         };
         self.file.info.history.push(record.clone());
         self.file.info.training.epochs = self.epoch();
         Ok(record)
     }
 
+    /// Validation runs every `validate_every` epochs and after the last one.
+    fn validation_due(&self, epochs_done: usize) -> bool {
+        epochs_done % self.settings.validate_every.max(1) == 0 || epochs_done >= self.settings.epochs
+    }
+
     /// Exact metrics on the validation poses.
-    pub fn validate(&self) -> Metrics {
+    pub fn validate(&mut self) -> Metrics {
+        let t = Instant::now();
         let x = predict(self.model(), &self.validation);
-        self.geometry.frames(&x, &self.validation_bodies)
+        let m = self.geometry.frames(&x, &self.validation_bodies);
+        self.times.validation += t.elapsed();
+        m
     }
 
     /// The model file with the current weights (no optimizer state).
