@@ -55,7 +55,11 @@ impl ClothGeometry {
     pub fn new(rest: &TriMesh, density: f32) -> ClothGeometry {
         let topo = Topology::new(rest);
         ClothGeometry {
-            rest_length: topo.edges.iter().map(|&e| length(&rest.positions, e)).collect(),
+            rest_length: topo
+                .edges
+                .iter()
+                .map(|&e| length(&rest.positions, e))
+                .collect(),
             edges: topo.edges,
             triangles: rest.triangles.clone(),
             hinges: topo.hinges.iter().map(|h| h.faces).collect(),
@@ -182,7 +186,10 @@ pub fn compare(
         .enumerate()
         .map(|(f, pose)| {
             let posed = PosedBody::new(body, pose);
-            series.iter().map(|s| geometry.frame(&s[f], &posed)).collect()
+            series
+                .iter()
+                .map(|s| geometry.frame(&s[f], &posed))
+                .collect()
         })
         .collect();
     (0..series.len())

@@ -119,7 +119,7 @@ enum Target {
 
 impl Builder {
     fn view(&mut self, bytes: &[u8], target: Target) -> json::Index<json::buffer::View> {
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         let offset = self.bin.len();
@@ -267,7 +267,7 @@ fn build(asset: &BakedAsset, bin_uri: Option<String>) -> (json::Root, Vec<u8>) {
         extras: None,
     });
     b.root.scene = Some(scene);
-    while b.bin.len() % 4 != 0 {
+    while !b.bin.len().is_multiple_of(4) {
         b.bin.push(0);
     }
     b.root.push(json::Buffer {
@@ -559,7 +559,7 @@ fn unit_quat(q: [f32; 4]) -> [f32; 4] {
 
 fn glb_bytes(root: &json::Root, bin: &[u8]) -> Vec<u8> {
     let mut text = json::serialize::to_vec(root).expect("glTF JSON serialises");
-    while text.len() % 4 != 0 {
+    while !text.len().is_multiple_of(4) {
         text.push(b' ');
     }
     let total = 12 + 8 + text.len() + 8 + bin.len();

@@ -82,8 +82,11 @@ fn header_bytes(h: &Header) -> [u8; HEADER_LEN] {
     b
 }
 
+/// Points of every frame.
+pub type Frames = Vec<Vec<[f32; 3]>>;
+
 /// Parses a PC2 file: header and frames (checks the size matches the header).
-pub fn read(bytes: &[u8]) -> Result<(Header, Vec<Vec<[f32; 3]>>), Pc2Error> {
+pub fn read(bytes: &[u8]) -> Result<(Header, Frames), Pc2Error> {
     if bytes.len() < HEADER_LEN || &bytes[..12] != MAGIC {
         return Err(Pc2Error::Format("missing POINTCACHE2 header".into()));
     }
@@ -127,15 +130,24 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("pc2-test-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("a.pc2");
-        let frames = vec![vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]], vec![[7.0, 8.0, 9.0], [0.5, 0.25, -1.0]]];
+        let frames = vec![
+            vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]],
+            vec![[7.0, 8.0, 9.0], [0.5, 0.25, -1.0]],
+        ];
         write(&path, &frames, 0.0).unwrap();
         let bytes = std::fs::read(&path).unwrap();
         assert_eq!(bytes.len(), 32 + 2 * 2 * 12);
         assert_eq!(&bytes[..12], b"POINTCACHE2\0");
         let (h, back) = read(&bytes).unwrap();
-        assert_eq!((h.version, h.points, h.samples, h.sample_rate), (1, 2, 2, 1.0));
+        assert_eq!(
+            (h.version, h.points, h.samples, h.sample_rate),
+            (1, 2, 2, 1.0)
+        );
         assert_eq!(back, frames);
-        assert!(matches!(write(&path, &[vec![[0.0; 3]], vec![]], 0.0), Err(Pc2Error::PointCount { frame: 1, .. })));
+        assert!(matches!(
+            write(&path, &[vec![[0.0; 3]], vec![]], 0.0),
+            Err(Pc2Error::PointCount { frame: 1, .. })
+        ));
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -3,8 +3,8 @@
 use super::train::{split_json, split_line, InputArgs};
 use crate::train::{PhaseTimes, Trainer};
 use anyhow::Result;
-use std::time::Instant;
 use serde_json::json;
+use std::time::Instant;
 
 /// Measure training speed: poses/s, garment-vertex-poses/s and the split between forward,
 /// losses, nearest neighbour (candidate lookup + amortised k-d tree refreshes) and backward.
@@ -42,7 +42,8 @@ pub fn run(args: Args) -> Result<i32> {
     let n = trainer.model().shape.vertices;
     let poses = trainer.poses.train.len() as i64;
     let batch = trainer.settings.batch as i64;
-    let ids = |s: usize| -> Vec<i64> { (0..batch).map(|i| (s as i64 * batch + i) % poses).collect() };
+    let ids =
+        |s: usize| -> Vec<i64> { (0..batch).map(|i| (s as i64 * batch + i) % poses).collect() };
     trainer.refresh();
     for s in 0..b.warmup {
         trainer.step(&ids(s), 1e-4)?;

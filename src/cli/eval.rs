@@ -62,9 +62,16 @@ pub fn run(args: Args) -> Result<i32> {
         }
         None => model.body.clone(),
     };
-    let clip = load_clip(&args.motion, &read_maps(&args.maps)?, &body.skeleton, args.fps)?;
+    let clip = load_clip(
+        &args.motion,
+        &read_maps(&args.maps)?,
+        &body.skeleton,
+        args.fps,
+    )?;
     let anim = &clip.animation;
-    let poses: Vec<_> = (0..anim.frame_count()).map(|f| anim.local_pose(f)).collect();
+    let poses: Vec<_> = (0..anim.frame_count())
+        .map(|f| anim.local_pose(f))
+        .collect();
     let garment = model_frames(&model.model, &body.skeleton, &poses, device);
     let lbs = lbs_frames(&model.lbs, &model.garment.positions, &body.skeleton, &poses);
     let geometry = ClothGeometry::new(&model.garment, model.info.fabric.density);
@@ -74,9 +81,13 @@ pub fn run(args: Args) -> Result<i32> {
     if let Some(path) = &args.body_out {
         let frames: Vec<Vec<[f32; 3]>> = poses
             .iter()
-            .map(|p| body.skin.skin_points(&body.mesh.positions, &body.skeleton.skinning_matrices(p)))
+            .map(|p| {
+                body.skin
+                    .skin_points(&body.mesh.positions, &body.skeleton.skinning_matrices(p))
+            })
             .collect();
-        exporters::pc2::write(path, &frames, 0.0).with_context(|| format!("writing {}", path.display()))?;
+        exporters::pc2::write(path, &frames, 0.0)
+            .with_context(|| format!("writing {}", path.display()))?;
     }
     println!(
         "{}: {} frames at {} fps, {} garment vertices",
@@ -85,7 +96,10 @@ pub fn run(args: Args) -> Result<i32> {
         anim.fps,
         model.model.shape.vertices
     );
-    println!("{:<12} {:>10} {:>10} {:>13} {:>12}", "", "edge (mm)", "bend", "collided (%)", "gravity (J)");
+    println!(
+        "{:<12} {:>10} {:>10} {:>13} {:>12}",
+        "", "edge (mm)", "bend", "collided (%)", "gravity (J)"
+    );
     for (name, x) in [("model", &m[0]), ("plain LBS", &m[1])] {
         println!("{}", row(name, x));
     }

@@ -102,7 +102,9 @@ fn model_report(path: &Path, full: bool) -> Result<Value> {
         .map(|(n, shape, dtype)| json!({ "name": n, "shape": shape, "dtype": dtype }))
         .collect();
     if full {
-        return Ok(json!({ "file": path.display().to_string(), "description": info, "tensors": tensors }));
+        return Ok(
+            json!({ "file": path.display().to_string(), "description": info, "tensors": tensors }),
+        );
     }
     let names = &info.skeleton.joint_names;
     let g = &info.garment;

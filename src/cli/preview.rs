@@ -2,8 +2,8 @@
 
 use crate::eval::model_frames;
 use crate::io::gltf_body::read_body;
-use crate::models::file::{self, check_skeleton};
 use crate::io::obj::read_obj;
+use crate::models::file::{self, check_skeleton};
 use crate::motion::{load_clip, read_maps};
 use crate::preview::{
     contact_sheet, save_png, DrawMesh, FramingMode, Panel, SheetOptions, View, BODY_GREY,
@@ -100,7 +100,11 @@ pub fn run(args: Args) -> Result<i32> {
     let model = match &args.model {
         Some(path) => {
             let m = file::load(path, tch::Device::Cpu)?;
-            check_skeleton(m.skeleton(), &body.skeleton, &args.body.display().to_string())?;
+            check_skeleton(
+                m.skeleton(),
+                &body.skeleton,
+                &args.body.display().to_string(),
+            )?;
             Some(m)
         }
         None => None,
@@ -122,12 +126,20 @@ pub fn run(args: Args) -> Result<i32> {
             let frames = pick_frames(clip.animation.frame_count(), args.frames, &args.frame_list)?;
             frames
                 .iter()
-                .map(|&f| (frame_label(&clip.animation, f), clip.animation.local_pose(f)))
+                .map(|&f| {
+                    (
+                        frame_label(&clip.animation, f),
+                        clip.animation.local_pose(f),
+                    )
+                })
                 .collect()
         }
         None => vec![("rest".to_string(), body.skeleton.rest.clone())],
     };
-    let mut triangles: Vec<&[[u32; 3]]> = garments.iter().map(|g| g.mesh.triangles.as_slice()).collect();
+    let mut triangles: Vec<&[[u32; 3]]> = garments
+        .iter()
+        .map(|g| g.mesh.triangles.as_slice())
+        .collect();
     if let Some(m) = &model {
         triangles.push(&m.garment.triangles);
     }
@@ -141,16 +153,33 @@ pub fn run(args: Args) -> Result<i32> {
             .map(|(i, g)| (g.mesh.positions.clone(), i))
             .collect();
         let Some(m) = &model else {
-            shots.push(Shot { label: label.clone(), body: body_points, garments: drawn });
+            shots.push(Shot {
+                label: label.clone(),
+                body: body_points,
+                garments: drawn,
+            });
             continue;
         };
         let g = garments.len();
-        let x = model_frames(&m.model, &body.skeleton, std::slice::from_ref(pose), tch::Device::Cpu);
+        let x = model_frames(
+            &m.model,
+            &body.skeleton,
+            std::slice::from_ref(pose),
+            tch::Device::Cpu,
+        );
         drawn.push((x.into_iter().next().expect("one frame"), g));
-        shots.push(Shot { label: format!("{label} model"), body: body_points.clone(), garments: drawn });
+        shots.push(Shot {
+            label: format!("{label} model"),
+            body: body_points.clone(),
+            garments: drawn,
+        });
         if args.lbs {
             let lbs = m.lbs.skin_points(&m.garment.positions, &skinning);
-            shots.push(Shot { label: format!("{label} LBS"), body: body_points, garments: vec![(lbs, g)] });
+            shots.push(Shot {
+                label: format!("{label} LBS"),
+                body: body_points,
+                garments: vec![(lbs, g)],
+            });
         }
     }
     let mut panels = Vec::new();
@@ -179,7 +208,11 @@ pub fn run(args: Args) -> Result<i32> {
     let opts = SheetOptions {
         panel_width: args.width,
         panel_height: args.height,
-        columns: if args.lbs { per_frame } else { (per_frame * poses.len()).min(per_frame * 3) } as u32,
+        columns: if args.lbs {
+            per_frame
+        } else {
+            (per_frame * poses.len()).min(per_frame * 3)
+        } as u32,
         // Each frame framed on its own: a walking body stays large and centred.
         framing: FramingMode::PerPanel,
         ..Default::default()
@@ -212,4 +245,3 @@ pub(crate) fn pick_frames(total: usize, count: usize, list: &[usize]) -> Result<
         })
         .collect())
 }
-

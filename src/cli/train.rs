@@ -26,7 +26,7 @@ pub struct Args {
     #[command(flatten)]
     pub inputs: InputArgs,
     /// Epochs (passes over the training poses).
-    #[arg(long, default_value_t = 200)]
+    #[arg(long, default_value_t = 1000)]
     pub epochs: usize,
     /// Output model (.safetensors).
     #[arg(long)]
@@ -124,7 +124,10 @@ impl InputArgs {
         let mut motion_names = Vec::new();
         for m in &self.motions {
             clips.push(load_clip(m, &maps, &body.skeleton, None)?.animation);
-            motion_names.push(m.file_name().map_or(String::new(), |n| n.to_string_lossy().into_owned()));
+            motion_names.push(
+                m.file_name()
+                    .map_or(String::new(), |n| n.to_string_lossy().into_owned()),
+            );
         }
         let settings = Settings {
             epochs,
@@ -175,13 +178,21 @@ pub(crate) fn parse_device(s: &str) -> Result<tch::Device> {
         },
     };
     if device != tch::Device::Cpu && !tch::Cuda::is_available() {
-        bail!("--device {s}: CUDA is not available to this build (libtorch without CUDA, or no GPU)");
+        bail!(
+            "--device {s}: CUDA is not available to this build (libtorch without CUDA, or no GPU)"
+        );
     }
     Ok(device)
 }
 
 /// Vertices inside the body at rest, non-manifold edges and degenerate faces.
-fn check_garment(garment: &Garment, body: &crate::io::gltf_body::Body, path: &Path, strict: bool, quiet: bool) -> Result<()> {
+fn check_garment(
+    garment: &Garment,
+    body: &crate::io::gltf_body::Body,
+    path: &Path,
+    strict: bool,
+    quiet: bool,
+) -> Result<()> {
     let mesh = &garment.mesh;
     let n = mesh.vertex_count();
     let mut problems = Vec::new();
@@ -221,7 +232,9 @@ fn check_garment(garment: &Garment, body: &crate::io::gltf_body::Body, path: &Pa
 
 /// `runs/skirt.safetensors` → `runs/skirt.ckpt.safetensors`.
 pub fn checkpoint_path(out: &Path) -> PathBuf {
-    let stem = out.file_stem().map_or("model".into(), |s| s.to_string_lossy().into_owned());
+    let stem = out
+        .file_stem()
+        .map_or("model".into(), |s| s.to_string_lossy().into_owned());
     out.with_file_name(format!("{stem}.ckpt.safetensors"))
 }
 
@@ -240,7 +253,11 @@ pub fn run(args: Args) -> Result<i32> {
     }
     let p = &trainer.poses;
     if !args.json {
-        let names: Vec<&str> = p.joints.iter().map(|&j| trainer.file.body.skeleton.joint_names[j].as_str()).collect();
+        let names: Vec<&str> = p
+            .joints
+            .iter()
+            .map(|&j| trainer.file.body.skeleton.joint_names[j].as_str())
+            .collect();
         println!(
             "poses: {} balanced of {} frames ({} train, {} validation; threshold {} rad on {})",
             p.train.len() + p.validation.len(),
@@ -263,7 +280,11 @@ pub fn run(args: Args) -> Result<i32> {
             println!("resuming after epoch {}", trainer.epoch());
         }
     }
-    let bar = super::progress((args.epochs.saturating_sub(trainer.epoch())) as u64, "epochs", args.json);
+    let bar = super::progress(
+        (args.epochs.saturating_sub(trainer.epoch())) as u64,
+        "epochs",
+        args.json,
+    );
     while trainer.epoch() < args.epochs {
         let epoch_start = Instant::now();
         let record = match trainer.run_epoch(|_, _| {}) {
@@ -325,7 +346,10 @@ pub fn run(args: Args) -> Result<i32> {
 
 fn blown_up(b: Blowup, epochs_done: usize, ckpt: &Path) -> anyhow::Error {
     let kept = if epochs_done > 0 {
-        format!("the checkpoint of epoch {epochs_done} is kept: {}", ckpt.display())
+        format!(
+            "the checkpoint of epoch {epochs_done} is kept: {}",
+            ckpt.display()
+        )
     } else {
         "no epoch finished, so there is no checkpoint".to_string()
     };

@@ -146,14 +146,23 @@ pub fn to_bytes(file: &ModelFile) -> Result<Vec<u8>> {
     blobs.push(("garment.rest".into(), Blob::float(&m.template)));
     let k = file.lbs.influences;
     blobs.push(("lbs.joints".into(), Blob::ints(&file.lbs.joint_indices, k)));
-    blobs.push(("lbs.weights".into(), Blob::floats(&file.lbs.joint_weights, k)));
+    blobs.push((
+        "lbs.weights".into(),
+        Blob::floats(&file.lbs.joint_weights, k),
+    ));
     let b = &file.body;
     blobs.push(("body.points".into(), Blob::points(&b.mesh.positions)));
     blobs.push(("body.normals".into(), Blob::points(&b.normals)));
     let tri: Vec<u32> = b.mesh.triangles.iter().flatten().copied().collect();
     blobs.push(("body.triangles".into(), Blob::ints(&tri, 3)));
-    blobs.push(("body.joints".into(), Blob::ints(&b.skin.joint_indices, b.skin.influences)));
-    blobs.push(("body.weights".into(), Blob::floats(&b.skin.joint_weights, b.skin.influences)));
+    blobs.push((
+        "body.joints".into(),
+        Blob::ints(&b.skin.joint_indices, b.skin.influences),
+    ));
+    blobs.push((
+        "body.weights".into(),
+        Blob::floats(&b.skin.joint_weights, b.skin.influences),
+    ));
     for (name, t) in &file.extra {
         blobs.push((name.clone(), Blob::float(t)));
     }
@@ -163,7 +172,11 @@ pub fn to_bytes(file: &ModelFile) -> Result<Vec<u8>> {
 }
 
 /// Reads only the description (for `inspect`).
-pub fn read_info(path: &Path) -> Result<(ModelInfo, Vec<(String, Vec<usize>, String)>)> {
+/// A stored tensor's name, shape and type.
+pub type TensorSummary = (String, Vec<usize>, String);
+
+/// The description and the tensor list of a model file.
+pub fn read_info(path: &Path) -> Result<(ModelInfo, Vec<TensorSummary>)> {
     let bytes = read_bytes(path)?;
     let st = parse(path, &bytes)?;
     let info = info_of(path, &bytes)?;
@@ -183,7 +196,8 @@ pub fn load(path: &Path, device: Device) -> Result<ModelFile> {
     let info = info_of(path, &bytes)?;
     let fail = |what: String| anyhow::anyhow!("{}: {what}", path.display());
     let get = |name: &str| -> Result<TensorView> {
-        st.tensor(name).map_err(|_| fail(format!("missing tensor '{name}'")))
+        st.tensor(name)
+            .map_err(|_| fail(format!("missing tensor '{name}'")))
     };
     let shape = info.shape;
     let (n, k) = (shape.vertices, shape.influences);
@@ -196,7 +210,10 @@ pub fn load(path: &Path, device: Device) -> Result<ModelFile> {
     let expect = |t: Tensor, dims: &[usize], name: &str| -> Result<Tensor> {
         let want: Vec<i64> = dims.iter().map(|&d| d as i64).collect();
         if t.size() != want {
-            return Err(fail(format!("tensor '{name}' has shape {:?}, expected {want:?}", t.size())));
+            return Err(fail(format!(
+                "tensor '{name}' has shape {:?}, expected {want:?}",
+                t.size()
+            )));
         }
         Ok(t)
     };
@@ -213,15 +230,29 @@ pub fn load(path: &Path, device: Device) -> Result<ModelFile> {
         feature_joints: joints.clone(),
         mlp,
         psd: expect(tensor(&get("psd")?, device)?, &[shape.width, 3 * n], "psd")?,
-        template: expect(tensor(&get("garment.rest")?, device)?, &[n, 3], "garment.rest")?,
-        joints: expect(tensor(&get("W.joints")?, device)?.to_kind(Kind::Int64), &[n, k], "W.joints")?,
+        template: expect(
+            tensor(&get("garment.rest")?, device)?,
+            &[n, 3],
+            "garment.rest",
+        )?,
+        joints: expect(
+            tensor(&get("W.joints")?, device)?.to_kind(Kind::Int64),
+            &[n, k],
+            "W.joints",
+        )?,
         logits: expect(tensor(&get("W.logits")?, device)?, &[n, k], "W.logits")?,
     };
     let lbs = skin_of(&get("lbs.joints")?, &get("lbs.weights")?)?;
-    let skeleton = info.skeleton.to_skeleton().map_err(|e| fail(e.to_string()))?;
+    let skeleton = info
+        .skeleton
+        .to_skeleton()
+        .map_err(|e| fail(e.to_string()))?;
     let body = Body {
         name: info.body.name.clone(),
-        mesh: TriMesh::new(points(&get("body.points")?)?, triangles(&get("body.triangles")?)?),
+        mesh: TriMesh::new(
+            points(&get("body.points")?)?,
+            triangles(&get("body.triangles")?)?,
+        ),
         normals: points(&get("body.normals")?)?,
         skeleton,
         skin: skin_of(&get("body.joints")?, &get("body.weights")?)?,
@@ -234,8 +265,12 @@ pub fn load(path: &Path, device: Device) -> Result<ModelFile> {
             triangles: uv.triangles.clone(),
         }),
     };
-    garment.validate().map_err(|e| fail(format!("garment: {e}")))?;
-    body.mesh.validate().map_err(|e| fail(format!("body: {e}")))?;
+    garment
+        .validate()
+        .map_err(|e| fail(format!("garment: {e}")))?;
+    body.mesh
+        .validate()
+        .map_err(|e| fail(format!("body: {e}")))?;
     let known = |name: &str| {
         name.starts_with("mlp.")
             || name.starts_with("W.")
@@ -335,7 +370,10 @@ impl Blob {
         Blob {
             dtype: Dtype::I32,
             shape: vec![v.len() / columns, columns],
-            data: v.iter().flat_map(|&x| (x.into() as i32).to_le_bytes()).collect(),
+            data: v
+                .iter()
+                .flat_map(|&x| (x.into() as i32).to_le_bytes())
+                .collect(),
         }
     }
 
@@ -393,7 +431,10 @@ fn tensor(view: &TensorView, device: Device) -> Result<Tensor> {
 }
 
 fn points(view: &TensorView) -> Result<Vec<[f32; 3]>> {
-    Ok(f32s(view)?.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
+    Ok(f32s(view)?
+        .chunks_exact(3)
+        .map(|c| [c[0], c[1], c[2]])
+        .collect())
 }
 
 fn triangles(view: &TensorView) -> Result<Vec<[u32; 3]>> {
@@ -428,7 +469,11 @@ impl SkeletonInfo {
             joint_names: skeleton.joint_names.clone(),
             parents: skeleton.parents.clone(),
             rest_translations: skeleton.rest.iter().map(|r| r.translation.into()).collect(),
-            rest_rotations: skeleton.rest.iter().map(|r| r.rotation.coords.into()).collect(),
+            rest_rotations: skeleton
+                .rest
+                .iter()
+                .map(|r| r.rotation.coords.into())
+                .collect(),
             inverse_bind_matrices: skeleton
                 .inverse_bind
                 .iter()
@@ -483,7 +528,10 @@ pub fn check_skeleton(model: &Skeleton, body: &Skeleton, body_name: &str) -> Res
             )));
         }
         if model.parents[j] != body.parents[j] {
-            return Err(differs(format!("joint '{}' has another parent", body.joint_names[j])));
+            return Err(differs(format!(
+                "joint '{}' has another parent",
+                body.joint_names[j]
+            )));
         }
         let moved = (model.rest[j].translation - body.rest[j].translation).norm() > 1e-4
             || model.rest[j].rotation.angle_to(&body.rest[j].rotation) > 1e-3

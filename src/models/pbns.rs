@@ -71,7 +71,8 @@ impl Pbns {
         let mut fan_in = shape.features;
         for _ in 0..shape.layers {
             let bound = 1.0 / (fan_in as f64).sqrt();
-            let w = Tensor::zeros([fan_in as i64, shape.width as i64], opts).uniform_(-bound, bound);
+            let w =
+                Tensor::zeros([fan_in as i64, shape.width as i64], opts).uniform_(-bound, bound);
             let b = Tensor::zeros([shape.width as i64], opts).uniform_(-bound, bound);
             mlp.push((w, b));
             fan_in = shape.width;
@@ -121,7 +122,12 @@ impl Pbns {
     }
 
     /// The inputs for `poses`: this model's pose features and the skinning matrices.
-    pub fn batch(&self, skeleton: &Skeleton, poses: &[Vec<JointTransform>], device: Device) -> PoseBatch {
+    pub fn batch(
+        &self,
+        skeleton: &Skeleton,
+        poses: &[Vec<JointTransform>],
+        device: Device,
+    ) -> PoseBatch {
         PoseBatch::new(skeleton, &self.feature_joints, poses, device)
     }
 

@@ -113,7 +113,11 @@ impl PoseBatch {
 
 /// Flattens an `[.., 3]` f32 tensor into points (copies to the CPU).
 pub fn tensor_points(t: &Tensor) -> Vec<[f32; 3]> {
-    let flat = t.to_device(Device::Cpu).to_kind(Kind::Float).contiguous().view([-1]);
+    let flat = t
+        .to_device(Device::Cpu)
+        .to_kind(Kind::Float)
+        .contiguous()
+        .view([-1]);
     let v: Vec<f32> = Vec::try_from(&flat).expect("float tensor");
     v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()
 }

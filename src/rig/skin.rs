@@ -30,17 +30,13 @@ impl Skin {
                 list.push((fallback_joint, 1.0));
             }
             let weights = normalized(&list.iter().map(|(_, w)| *w).collect::<Vec<_>>());
-            for k in 0..influences {
-                match list.get(k) {
-                    Some(&(j, _)) => {
-                        joint_indices.push(j);
-                        joint_weights.push(weights[k]);
-                    }
-                    None => {
-                        joint_indices.push(0);
-                        joint_weights.push(0.0);
-                    }
-                }
+            for (&(j, _), &w) in list.iter().zip(&weights) {
+                joint_indices.push(j);
+                joint_weights.push(w);
+            }
+            for _ in list.len()..influences {
+                joint_indices.push(0);
+                joint_weights.push(0.0);
             }
         }
         Skin {

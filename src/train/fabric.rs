@@ -91,7 +91,7 @@ impl Fabric {
         };
         let fabric: Fabric =
             toml::from_str(&text).with_context(|| format!("{origin}: invalid fabric config"))?;
-        fabric.check().with_context(|| format!("{origin}"))?;
+        fabric.check().with_context(|| origin.clone())?;
         Ok(fabric)
     }
 
@@ -118,7 +118,10 @@ impl Fabric {
         for r in &self.regions {
             for &v in &r.vertices {
                 if v as usize >= n {
-                    bail!("fabric '{}': region vertex {v} out of range ({n} vertices)", self.name);
+                    bail!(
+                        "fabric '{}': region vertex {v} out of range ({n} vertices)",
+                        self.name
+                    );
                 }
                 edge[v as usize] = r.edge;
                 bend[v as usize] = r.bend;

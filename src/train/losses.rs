@@ -88,7 +88,10 @@ impl Cloth {
     /// `Σ w_h |n_a − n_b|²` over face-adjacent pairs; metric: mean (1 − cos).
     pub fn bend(&self, x: &Tensor) -> (Tensor, Tensor) {
         let n = self.face_normals(x);
-        let (na, nb) = (n.index_select(1, &self.hinge_a), n.index_select(1, &self.hinge_b));
+        let (na, nb) = (
+            n.index_select(1, &self.hinge_a),
+            n.index_select(1, &self.hinge_b),
+        );
         let energy = ((&na - &nb).square().sum_dim_intlist(-1, false, Kind::Float)
             * &self.hinge_weight)
             .sum_dim_intlist(1, false, Kind::Float)
@@ -122,7 +125,12 @@ impl Cloth {
 
 /// `Σ min(d·n − ε, 0)²` with `d` from each vertex's nearest body vertex and `n` its normal;
 /// metric: the fraction of vertices with `d·n < 0` (inside the body).
-pub fn collision(x: &Tensor, body_points: &Tensor, body_normals: &Tensor, margin: f32) -> (Tensor, Tensor) {
+pub fn collision(
+    x: &Tensor,
+    body_points: &Tensor,
+    body_normals: &Tensor,
+    margin: f32,
+) -> (Tensor, Tensor) {
     let dot = ((x - body_points) * body_normals).sum_dim_intlist(-1, false, Kind::Float);
     let energy = (&dot - margin as f64)
         .clamp_max(0.0)

@@ -162,7 +162,10 @@ impl Trainer {
             bail!("--batch, --width and the layer count must be positive");
         }
         if ![4, 8].contains(&settings.influences) {
-            bail!("--influences must be 4 or 8 (what engines play), not {}", settings.influences);
+            bail!(
+                "--influences must be 4 or 8 (what engines play), not {}",
+                settings.influences
+            );
         }
         tch::manual_seed(settings.seed as i64);
         let Inputs {
@@ -188,7 +191,11 @@ impl Trainer {
         // meets the feet, whose weights are not on the skirt).
         let touched = body.skin.subset(&nearest::body_subset(&body, rest, TOUCH));
         let mut joints = poses::moving_joints(&body.skeleton, &lbs, settings.joint_share);
-        joints.extend(poses::moving_joints(&body.skeleton, &touched, 0.5 * settings.joint_share));
+        joints.extend(poses::moving_joints(
+            &body.skeleton,
+            &touched,
+            0.5 * settings.joint_share,
+        ));
         joints.sort_unstable();
         joints.dedup();
         let poses = poses::pose_set(
@@ -213,11 +220,25 @@ impl Trainer {
             joints: body.skeleton.joint_count(),
             influences: settings.influences,
         };
-        let mut model = Pbns::new(shape, poses.joints.clone(), rest, &lbs, &body.skeleton, device);
+        let mut model = Pbns::new(
+            shape,
+            poses.joints.clone(),
+            rest,
+            &lbs,
+            &body.skeleton,
+            device,
+        );
         model.set_trainable(settings.train_weights);
-        let pinned_list = fabric.pinned.clone().unwrap_or_else(|| garment.sidecar.pinned.clone());
+        let pinned_list = fabric
+            .pinned
+            .clone()
+            .unwrap_or_else(|| garment.sidecar.pinned.clone());
         if let Some(bad) = pinned_list.iter().find(|&&v| v as usize >= rest.len()) {
-            bail!("fabric '{}': pinned vertex {bad} out of range ({} vertices)", fabric.name, rest.len());
+            bail!(
+                "fabric '{}': pinned vertex {bad} out of range ({} vertices)",
+                fabric.name,
+                rest.len()
+            );
         }
         let cloth = Cloth::new(&garment.mesh, &fabric, &pinned_list, device)?;
         let locals = |set: &[poses::Pose]| set.iter().map(|p| p.local.clone()).collect::<Vec<_>>();
@@ -320,7 +341,8 @@ impl Trainer {
     pub fn learning_rate(&self, epoch: usize) -> f64 {
         let s = &self.settings;
         let t = epoch as f64 / (s.epochs.max(2) - 1) as f64;
-        let f = s.final_lr_fraction + (1.0 - s.final_lr_fraction) * 0.5 * (1.0 + (std::f64::consts::PI * t.min(1.0)).cos());
+        let f = s.final_lr_fraction
+            + (1.0 - s.final_lr_fraction) * 0.5 * (1.0 + (std::f64::consts::PI * t.min(1.0)).cos());
         s.learning_rate * f
     }
 
@@ -344,7 +366,11 @@ impl Trainer {
         if fresh {
             self.refresh();
         }
-        if !fresh && self.epoch() % self.settings.refresh_every.max(1) == 0 {
+        if !fresh
+            && self
+                .epoch()
+                .is_multiple_of(self.settings.refresh_every.max(1))
+        {
             let x = self.predict_train();
             self.pending = Some(self.correspondences.spawn_refresh(x));
         }
@@ -414,7 +440,13 @@ impl Trainer {
         // 0.5 is a logit change of ~9): they get a larger learning rate.
         let rates: Vec<f64> = named
             .iter()
-            .map(|(n, _)| if n == "W.logits" { lr * self.settings.weights_lr_scale } else { lr })
+            .map(|(n, _)| {
+                if n == "W.logits" {
+                    lr * self.settings.weights_lr_scale
+                } else {
+                    lr
+                }
+            })
             .collect();
         let params: Vec<Tensor> = named.into_iter().map(|(_, t)| t.shallow_clone()).collect();
         self.adam.update(&params, &rates);
@@ -432,12 +464,21 @@ impl Trainer {
     }
 
     /// Runs one epoch; `on_step(done, total)` after each step. Appends to the history.
-    pub fn run_epoch(&mut self, mut on_step: impl FnMut(usize, usize)) -> Result<EpochRecord, Blowup> {
+    pub fn run_epoch(
+        &mut self,
+        mut on_step: impl FnMut(usize, usize),
+    ) -> Result<EpochRecord, Blowup> {
         self.upkeep();
         let epoch = self.epoch();
         let lr = self.learning_rate(epoch);
         let mut order: Vec<i64> = (0..self.train.len() as i64).collect();
-        poses::shuffle(&mut order, self.settings.seed.wrapping_add(1 + epoch as u64).wrapping_mul(0x2545_F491_4F6C_DD1D));
+        poses::shuffle(
+            &mut order,
+            self.settings
+                .seed
+                .wrapping_add(1 + epoch as u64)
+                .wrapping_mul(0x2545_F491_4F6C_DD1D),
+        );
         let total = self.steps_per_epoch();
         let mut sums = EpochSums::default();
         for (s, ids) in order.chunks(self.settings.batch).enumerate() {
@@ -469,7 +510,8 @@ impl Trainer {
 
     /// Validation runs every `validate_every` epochs and after the last one.
     fn validation_due(&self, epochs_done: usize) -> bool {
-        epochs_done % self.settings.validate_every.max(1) == 0 || epochs_done >= self.settings.epochs
+        epochs_done.is_multiple_of(self.settings.validate_every.max(1))
+            || epochs_done >= self.settings.epochs
     }
 
     /// Exact metrics on the validation poses.
@@ -489,7 +531,8 @@ impl Trainer {
     /// Writes the model; with `checkpoint`, the Adam state too (for `--resume`).
     pub fn save(&mut self, path: &std::path::Path, checkpoint: bool) -> Result<()> {
         self.file.extra = if checkpoint {
-            self.adam.state(&self.model().parameters(self.settings.train_weights))
+            self.adam
+                .state(&self.model().parameters(self.settings.train_weights))
         } else {
             Vec::new()
         };
@@ -604,7 +647,9 @@ impl Adam {
                 .iter()
                 .find(|(n, _)| n == name)
                 .map(|(_, t)| t)
-                .ok_or_else(|| anyhow::anyhow!("checkpoint has no '{name}' (a model file, not a checkpoint?)"))
+                .ok_or_else(|| {
+                    anyhow::anyhow!("checkpoint has no '{name}' (a model file, not a checkpoint?)")
+                })
         };
         self.step = find("adam.step")?.double_value(&[0]) as i64;
         for (i, (name, p)) in params.iter().enumerate() {

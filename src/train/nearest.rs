@@ -16,6 +16,9 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use tch::{Device, Kind, Tensor};
 
+/// Points, normals and tree of the body subset in one pose.
+type PosedSubset = (Vec<[f32; 3]>, Vec<[f32; 3]>, PointIndex);
+
 pub struct Correspondences {
     /// Posed body vertices (the subset near the garment) of all poses, `[P * M, 3]`.
     points: Tensor,
@@ -38,10 +41,13 @@ impl Correspondences {
         garment_vertices: usize,
         device: Device,
     ) -> Correspondences {
-        let rest: Vec<[f32; 3]> = subset.iter().map(|&v| body.mesh.positions[v as usize]).collect();
+        let rest: Vec<[f32; 3]> = subset
+            .iter()
+            .map(|&v| body.mesh.positions[v as usize])
+            .collect();
         let rest_n: Vec<[f32; 3]> = subset.iter().map(|&v| body.normals[v as usize]).collect();
         let skin = body.skin.subset(subset);
-        let posed: Vec<(Vec<[f32; 3]>, Vec<[f32; 3]>, PointIndex)> = poses
+        let posed: Vec<PosedSubset> = poses
             .par_iter()
             .map(|pose| {
                 let m = body.skeleton.skinning_matrices(pose);
@@ -51,8 +57,11 @@ impl Correspondences {
                 (p, n, tree)
             })
             .collect();
-        let flat = |f: &dyn Fn(&(Vec<[f32; 3]>, Vec<[f32; 3]>, PointIndex)) -> &Vec<[f32; 3]>| {
-            let v: Vec<f32> = posed.iter().flat_map(|x| f(x).iter().flatten().copied()).collect();
+        let flat = |f: &dyn Fn(&PosedSubset) -> &Vec<[f32; 3]>| {
+            let v: Vec<f32> = posed
+                .iter()
+                .flat_map(|x| f(x).iter().flatten().copied())
+                .collect();
             Tensor::from_slice(&v).view([-1, 3]).to_device(device)
         };
         let points = flat(&|x| &x.0);
@@ -63,7 +72,11 @@ impl Correspondences {
             normals,
             trees,
             candidates: Tensor::zeros(
-                [poses.len() as i64, garment_vertices as i64, per_vertex as i64],
+                [
+                    poses.len() as i64,
+                    garment_vertices as i64,
+                    per_vertex as i64,
+                ],
                 (Kind::Int64, device),
             ),
             subset: subset.len(),
@@ -104,7 +117,10 @@ impl Correspondences {
             let cand = self.candidates.index_select(0, poses);
             let size = cand.size();
             let (b, n, c) = (size[0], size[1], size[2]);
-            let p = self.points.index_select(0, &cand.view([-1])).view([b, n, c, 3]);
+            let p = self
+                .points
+                .index_select(0, &cand.view([-1]))
+                .view([b, n, c, 3]);
             let d2 = (p - x.detach().unsqueeze(2))
                 .square()
                 .sum_dim_intlist(-1, false, Kind::Float);
@@ -131,7 +147,12 @@ pub fn body_subset(body: &Body, garment: &[[f32; 3]], reach: f32) -> Vec<u32> {
 }
 
 /// Rows of the flattened `[P * m, 3]` body tensor: `c` per garment vertex per pose.
-fn candidate_lists(trees: &[PointIndex], garment: &[Vec<[f32; 3]>], m: usize, c: usize) -> Vec<i64> {
+fn candidate_lists(
+    trees: &[PointIndex],
+    garment: &[Vec<[f32; 3]>],
+    m: usize,
+    c: usize,
+) -> Vec<i64> {
     garment
         .par_iter()
         .zip(trees)

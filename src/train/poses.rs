@@ -58,11 +58,9 @@ pub fn balanced(clips: &[SkelAnimation], joints: &[usize], threshold: f32) -> Ve
                 .iter()
                 .map(|&j| clip.rotations[f][j].scaled_axis())
                 .collect();
-            let near = kept.iter().any(|k| {
-                k.iter()
-                    .zip(&rv)
-                    .all(|(a, b)| (a - b).amax() < threshold)
-            });
+            let near = kept
+                .iter()
+                .any(|k| k.iter().zip(&rv).all(|(a, b)| (a - b).amax() < threshold));
             if !near {
                 kept.push(rv);
                 out.push((c, f));
