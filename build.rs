@@ -5,7 +5,12 @@ fn main() {
     // GPU builds: keep libtorch_cuda linked even though no symbol of it is referenced directly,
     // or CUDA stays unavailable at run time (DESIGN.md). Only for the binary, only when asked.
     if std::env::var_os("GARMENTBAKE_CUDA_LINK").is_some() {
-        for arg in ["-Wl,--no-as-needed", "-ltorch_cuda", "-ltorch", "-Wl,--as-needed"] {
+        for arg in [
+            "-Wl,--no-as-needed",
+            "-ltorch_cuda",
+            "-ltorch",
+            "-Wl,--as-needed",
+        ] {
             println!("cargo:rustc-link-arg-bins={arg}");
         }
     }

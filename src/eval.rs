@@ -5,7 +5,7 @@
 use crate::garment::body_offsets;
 use crate::geometry::{face_normals, PointIndex, Topology, TriMesh};
 use crate::io::gltf_body::Body;
-use crate::models::pose_features::{tensor_points, PoseBatch};
+use crate::models::pose_features::tensor_points;
 use crate::models::Pbns;
 use crate::rig::{JointTransform, Skeleton, Skin};
 use crate::train::losses::GRAVITY;
@@ -152,7 +152,7 @@ pub fn model_frames(
     let mut out = Vec::with_capacity(poses.len());
     tch::no_grad(|| {
         for chunk in poses.chunks(CHUNK) {
-            let batch = PoseBatch::new(skeleton, chunk, device);
+            let batch = model.batch(skeleton, chunk, device);
             let points = tensor_points(&model.forward(&batch).vertices);
             out.extend(points.chunks_exact(n).map(<[_]>::to_vec));
         }

@@ -26,7 +26,7 @@ fn lowest_vertex(
                 .iter()
                 .map(|&v| body.mesh.positions[v as usize])
                 .collect();
-            let sub = body.skin.select(&region);
+            let sub = body.skin.subset(&region);
             sub.skin_points(&pts, &skinning)
                 .iter()
                 .map(|p| p[1])

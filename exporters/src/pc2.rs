@@ -82,10 +82,10 @@ fn header_bytes(h: &Header) -> [u8; HEADER_LEN] {
     b
 }
 
-/// Parses a PC2 file: header and frames (checks the size matches the header).
-/// Points per frame, frame-major.
+/// Points of every frame.
 pub type Frames = Vec<Vec<[f32; 3]>>;
 
+/// Parses a PC2 file: header and frames (checks the size matches the header).
 pub fn read(bytes: &[u8]) -> Result<(Header, Frames), Pc2Error> {
     if bytes.len() < HEADER_LEN || &bytes[..12] != MAGIC {
         return Err(Pc2Error::Format("missing POINTCACHE2 header".into()));

@@ -84,7 +84,7 @@ pub fn skinned_mesh_asset(
             .map(|&s| v[s as usize])
             .collect::<Vec<_>>()
     };
-    let skin = skin.select(&source_vertex);
+    let skin = skin.subset(&source_vertex);
     asset::Mesh {
         name: name.to_string(),
         points: pick(&mesh.positions),

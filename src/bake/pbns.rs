@@ -6,7 +6,6 @@ use super::compress::{offset_matrix, spectrum, spectrum_of, UsedOffsets};
 use super::{animation_asset, skeleton_asset, skinned_mesh_asset, BODY_COLOR};
 use crate::models::file::ModelFile;
 use crate::models::pbns::flat;
-use crate::models::pose_features::PoseBatch;
 use crate::rig::{SkelAnimation, Skin};
 use anyhow::{bail, Result};
 use exporters::asset::{BakedAsset, BlendShape};
@@ -63,7 +62,7 @@ fn clip_coefficients(model: &ModelFile, clip: &SkelAnimation, device: Device) ->
         poses
             .chunks(256)
             .flat_map(|chunk| {
-                let batch = PoseBatch::new(model.skeleton(), chunk, device);
+                let batch = model.model.batch(model.skeleton(), chunk, device);
                 let x: Vec<f32> = flat(&model.model.coefficients(&batch.features), Kind::Float);
                 x.chunks_exact(k).map(<[f32]>::to_vec).collect::<Vec<_>>()
             })

@@ -8,10 +8,12 @@ use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 
 /// Describe a glTF/glb (nodes, skins, joints, meshes, morph targets, animations), a BVH clip
-/// (joints, frames, fps, duration) or an OBJ mesh (vertices, faces, boundary loops).
+/// (joints, frames, fps, duration), an OBJ mesh (vertices, faces, boundary loops) or a trained
+/// model (.safetensors: its description and tensors; --json prints the whole description,
+/// faces and UVs included).
 #[derive(clap::Args)]
 pub struct Args {
-    /// File to describe (.glb, .gltf, .bvh, .obj).
+    /// File to describe (.glb, .gltf, .bvh, .obj, .safetensors).
     file: PathBuf,
     /// Print JSON instead of text.
     #[arg(long)]
@@ -28,8 +30,9 @@ pub fn run(args: Args) -> Result<i32> {
         "glb" | "gltf" => gltf_report(&args.file)?,
         "bvh" => bvh_report(&args.file)?,
         "obj" => obj_report(&args.file)?,
+        "safetensors" => model_report(&args.file, args.json)?,
         _ => bail!(
-            "{}: unknown file type (expected .glb, .gltf, .bvh or .obj)",
+            "{}: unknown file type (expected .glb, .gltf, .bvh, .obj or .safetensors)",
             args.file.display()
         ),
     };
@@ -89,6 +92,39 @@ fn obj_report(path: &Path) -> Result<Value> {
         "file": path.display().to_string(), "vertices": obj.mesh.vertex_count(), "faces": obj.mesh.triangle_count(),
         "edges": topo.edges.len(), "boundary_loops": loops.iter().map(Vec::len).collect::<Vec<_>>(),
         "non_manifold_edges": topo.non_manifold_edges.len(), "has_uvs": obj.mesh.uv.is_some(), "bounds_min": lo, "bounds_max": hi,
+    }))
+}
+
+fn model_report(path: &Path, full: bool) -> Result<Value> {
+    let (info, tensors) = crate::models::file::read_info(path)?;
+    let tensors: Vec<Value> = tensors
+        .iter()
+        .map(|(n, shape, dtype)| json!({ "name": n, "shape": shape, "dtype": dtype }))
+        .collect();
+    if full {
+        return Ok(
+            json!({ "file": path.display().to_string(), "description": info, "tensors": tensors }),
+        );
+    }
+    let names = &info.skeleton.joint_names;
+    let g = &info.garment;
+    let last = info.history.last();
+    Ok(json!({
+        "file": path.display().to_string(),
+        "format": format!("{} v{}", info.format, info.version),
+        "model": {
+            "mlp": format!("{} inputs → {} × {} ReLU → {} PSD blend shapes", info.shape.features, info.shape.layers, info.shape.width, info.shape.width),
+            "influences": info.shape.influences,
+            "feature_joints": info.skeleton.feature_joints.iter().map(|&j| names[j].clone()).collect::<Vec<_>>(),
+        },
+        "skeleton": { "joints": names.len(), "names": names },
+        "garment": { "name": g.name, "vertices": g.vertices, "faces": g.faces.len(), "uvs": g.uv.is_some(),
+                     "pinned": g.pinned.len(), "rest_hash": g.rest_hash },
+        "body": { "name": info.body.name, "vertices": info.body.vertices, "rest_hash": info.body.rest_hash },
+        "fabric": info.fabric,
+        "training": info.training,
+        "history": { "epochs": info.history.len(), "last": last },
+        "tensors": tensors,
     }))
 }
 

@@ -26,7 +26,7 @@ pub struct Args {
     #[command(flatten)]
     pub inputs: InputArgs,
     /// Epochs (passes over the training poses).
-    #[arg(long, default_value_t = 200)]
+    #[arg(long, default_value_t = 1000)]
     pub epochs: usize,
     /// Output model (.safetensors).
     #[arg(long)]
@@ -93,6 +93,16 @@ pub struct InputArgs {
     /// Learning rate of the blend-weight logits relative to --lr.
     #[arg(long, default_value_t = 10.0)]
     pub weights_lr_scale: f64,
+    /// Initial blend weights: copy the body's within this distance (metres) of it at rest and
+    /// interpolate them smoothly over the garment beyond (a skirt's hanging part).
+    #[arg(long, default_value_t = 0.02)]
+    pub inpaint_beyond: f32,
+    /// Copy the body's weights by proximity everywhere (no inpainting).
+    #[arg(long)]
+    pub no_inpaint: bool,
+    /// Epochs between validation passes (exact metrics on the held-out poses).
+    #[arg(long, default_value_t = 5)]
+    pub validate_every: usize,
     /// CPU threads (torch and the nearest-neighbour queries).
     #[arg(long, default_value_t = 2)]
     pub threads: usize,
@@ -131,6 +141,8 @@ impl InputArgs {
             refresh_every: self.refresh_every,
             candidates: self.candidates.max(1),
             weights_lr_scale: self.weights_lr_scale,
+            validate_every: self.validate_every,
+            inpaint_beyond: (!self.no_inpaint).then_some(self.inpaint_beyond),
             device: parse_device(&self.device)?,
             ..Settings::default()
         };
@@ -255,6 +267,15 @@ pub fn run(args: Args) -> Result<i32> {
             trainer.settings.pose_threshold,
             names.join(", ")
         );
+        let t = &trainer.file.info.training;
+        if t.inpainted > 0 {
+            println!(
+                "initial weights: {} of {} vertices hang farther than {} m from the body: inpainted",
+                t.inpainted,
+                trainer.model().shape.vertices,
+                t.inpaint_beyond.unwrap_or_default()
+            );
+        }
         if trainer.epoch() > 0 {
             println!("resuming after epoch {}", trainer.epoch());
         }
@@ -273,7 +294,9 @@ pub fn run(args: Args) -> Result<i32> {
                 return Err(blown_up(blowup, trainer.epoch(), &ckpt));
             }
         };
+        let save_start = Instant::now();
         trainer.save(&ckpt, true)?;
+        let save_s = save_start.elapsed().as_secs_f64();
         let t = &record.train;
         bar.set_message(format!(
             "edge {:.2} mm  bend {:.4}  collided {:.2} %  gravity {:.3} J",
@@ -286,7 +309,7 @@ pub fn run(args: Args) -> Result<i32> {
                 json!({ "epoch": record.epoch, "loss": record.loss, "terms": terms_json(&record.terms),
                         "train": record.train, "validation": record.validation,
                         "learning_rate": trainer.learning_rate(record.epoch - 1),
-                        "seconds": epoch_start.elapsed().as_secs_f64() })
+                        "seconds": epoch_start.elapsed().as_secs_f64(), "checkpoint_seconds": save_s })
             );
         }
     }
@@ -308,10 +331,12 @@ pub fn run(args: Args) -> Result<i32> {
                 "epoch {}: train edge {:.3} mm, bend {:.4}, collided {:.2} %, gravity {:.4} J",
                 r.epoch, t.edge_mm, t.bend, t.collided_pct, t.gravity_j
             );
-            println!(
-                "validation ({} poses): edge {:.3} mm, bend {:.4}, collided {:.2} %, gravity {:.4} J",
-                trainer.poses.validation.len(), v.edge_mm, v.bend, v.collided_pct, v.gravity_j
-            );
+            if let Some(v) = v {
+                println!(
+                    "validation ({} poses): edge {:.3} mm, bend {:.4}, collided {:.2} %, gravity {:.4} J",
+                    trainer.poses.validation.len(), v.edge_mm, v.bend, v.collided_pct, v.gravity_j
+                );
+            }
         }
         println!("{}", split_line(&trainer.times));
         println!("wrote {} ({:.0} s)", args.out.display(), seconds);
@@ -344,7 +369,7 @@ pub(crate) fn split_json(t: &crate::train::PhaseTimes) -> serde_json::Value {
         "poses_per_s": t.poses as f64 / total,
         "forward_pct": pct(t.forward), "losses_pct": pct(t.losses),
         "nearest_pct": pct(t.nearest + t.refresh), "nearest_refresh_pct": pct(t.refresh),
-        "backward_pct": pct(t.backward),
+        "backward_pct": pct(t.backward), "validation_seconds": t.validation.as_secs_f64(),
     })
 }
 

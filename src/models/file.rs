@@ -51,7 +51,7 @@ pub struct SkeletonInfo {
     pub rest_rotations: Vec<[f32; 4]>,
     /// Column-major 4×4.
     pub inverse_bind_matrices: Vec<[f32; 16]>,
-    /// Joints whose rotations feed the MLP (6 values each).
+    /// Joints whose rotations feed the MLP (6 values each): those that move the garment.
     pub feature_joints: Vec<usize>,
 }
 
@@ -91,6 +91,10 @@ pub struct TrainingInfo {
     pub pose_threshold: f32,
     pub poses_train: usize,
     pub poses_validation: usize,
+    /// Initial weights were inpainted beyond this distance from the body (metres).
+    pub inpaint_beyond: Option<f32>,
+    /// Vertices whose initial weights were inpainted.
+    pub inpainted: usize,
 }
 
 /// One epoch of the metric history.
@@ -102,8 +106,8 @@ pub struct EpochRecord {
     pub terms: [f64; 5],
     /// Training-step metrics (candidate nearest neighbours).
     pub train: Metrics,
-    /// Exact metrics on the validation poses.
-    pub validation: Metrics,
+    /// Exact metrics on the validation poses (every few epochs, and the last).
+    pub validation: Option<Metrics>,
 }
 
 /// Everything a model file holds.
@@ -168,10 +172,11 @@ pub fn to_bytes(file: &ModelFile) -> Result<Vec<u8>> {
 }
 
 /// Reads only the description (for `inspect`).
-/// Name, shape and dtype of every stored tensor.
-pub type TensorList = Vec<(String, Vec<usize>, String)>;
+/// A stored tensor's name, shape and type.
+pub type TensorSummary = (String, Vec<usize>, String);
 
-pub fn read_info(path: &Path) -> Result<(ModelInfo, TensorList)> {
+/// The description and the tensor list of a model file.
+pub fn read_info(path: &Path) -> Result<(ModelInfo, Vec<TensorSummary>)> {
     let bytes = read_bytes(path)?;
     let st = parse(path, &bytes)?;
     let info = info_of(path, &bytes)?;
@@ -212,8 +217,17 @@ pub fn load(path: &Path, device: Device) -> Result<ModelFile> {
         }
         Ok(t)
     };
+    let joints = &info.skeleton.feature_joints;
+    if shape.features != 6 * joints.len() || joints.iter().any(|&j| j >= shape.joints) {
+        return Err(fail(format!(
+            "{} MLP inputs do not match the {} feature joints",
+            shape.features,
+            joints.len()
+        )));
+    }
     let model = Pbns {
         shape,
+        feature_joints: joints.clone(),
         mlp,
         psd: expect(tensor(&get("psd")?, device)?, &[shape.width, 3 * n], "psd")?,
         template: expect(

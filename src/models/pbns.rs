@@ -7,7 +7,7 @@
 //! the sparsity pattern fixed means baking the trained skin loses nothing.
 
 use super::pose_features::PoseBatch;
-use crate::rig::{Skeleton, Skin};
+use crate::rig::{JointTransform, Skeleton, Skin};
 use tch::{Device, Kind, Tensor};
 
 /// Logit of a slot that holds no joint: its softmax weight is exactly zero in f32 and so is its
@@ -34,6 +34,8 @@ pub struct PbnsShape {
 
 pub struct Pbns {
     pub shape: PbnsShape,
+    /// Joints whose rotations are the MLP input (6 values each), in order.
+    pub feature_joints: Vec<usize>,
     /// `(weight [in, out], bias [out])` per layer.
     pub mlp: Vec<(Tensor, Tensor)>,
     /// PSD basis `[K, N * 3]`.
@@ -58,6 +60,7 @@ impl Pbns {
     /// global tch seed), `D = 0` (so the untrained model is plain LBS), `W` from `skin`.
     pub fn new(
         shape: PbnsShape,
+        feature_joints: Vec<usize>,
         template: &[[f32; 3]],
         skin: &Skin,
         skeleton: &Skeleton,
@@ -80,6 +83,7 @@ impl Pbns {
         let k = shape.influences as i64;
         Pbns {
             shape,
+            feature_joints,
             mlp,
             psd,
             template: points_tensor(template, device),
@@ -115,6 +119,16 @@ impl Pbns {
     /// Blend weights `[N, influences]`: non-negative, summing to one per vertex.
     pub fn weights(&self) -> Tensor {
         self.logits.softmax(-1, Kind::Float)
+    }
+
+    /// The inputs for `poses`: this model's pose features and the skinning matrices.
+    pub fn batch(
+        &self,
+        skeleton: &Skeleton,
+        poses: &[Vec<JointTransform>],
+        device: Device,
+    ) -> PoseBatch {
+        PoseBatch::new(skeleton, &self.feature_joints, poses, device)
     }
 
     /// The MLP output `X(θ)`, `[B, K]`: the weights of the PSD basis (a baked clip's

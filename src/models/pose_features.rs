@@ -1,9 +1,12 @@
-//! The MLP's input: the pose as 6-D rotations (first two matrix columns) of the non-root joints.
+//! The MLP's input: the pose as 6-D rotations (first two matrix columns) of the joints that move
+//! the garment (never a root).
 //!
 //! Global orientation and root translation are excluded: skinning applies them, and a garment
-//! must not deform differently because the character turned or walked elsewhere. The 6-D form
-//! is continuous (unlike axis-angle or quaternions), which an MLP needs; the identity's columns
-//! are subtracted so the rest pose maps to zeros.
+//! must not deform differently because the character turned or walked elsewhere. Joints that do
+//! not move the garment (a skirt's arms, fingers) are excluded too: in a few hundred training
+//! poses they correlate by chance with the legs, and the network would learn those accidents and
+//! fail on unseen poses. The 6-D form is continuous (unlike axis-angle or quaternions), which an
+//! MLP needs; the identity's columns are subtracted so the rest pose maps to zeros.
 
 use crate::rig::{JointTransform, Skeleton};
 use nalgebra::UnitQuaternion;
@@ -12,22 +15,17 @@ use tch::{Device, Kind, Tensor};
 /// Values per joint.
 pub const PER_JOINT: usize = 6;
 
-/// Joints that feed the MLP: every joint with a parent (roots carry the global orientation).
-pub fn feature_joints(skeleton: &Skeleton) -> Vec<usize> {
+/// Every joint with a parent (roots carry the global orientation).
+pub fn non_root_joints(skeleton: &Skeleton) -> Vec<usize> {
     (0..skeleton.joint_count())
         .filter(|&j| skeleton.parents[j].is_some())
         .collect()
 }
 
-/// MLP input width for a skeleton.
-pub fn feature_count(skeleton: &Skeleton) -> usize {
-    PER_JOINT * feature_joints(skeleton).len()
-}
-
-/// Features of one pose given its local joint rotations.
-pub fn pose_features(skeleton: &Skeleton, rotations: &[UnitQuaternion<f32>]) -> Vec<f32> {
-    let mut out = Vec::with_capacity(feature_count(skeleton));
-    for j in feature_joints(skeleton) {
+/// Features of one pose given its local joint rotations, for the joints `joints`.
+pub fn pose_features(joints: &[usize], rotations: &[UnitQuaternion<f32>]) -> Vec<f32> {
+    let mut out = Vec::with_capacity(PER_JOINT * joints.len());
+    for &j in joints {
         let m = rotations[j].to_rotation_matrix();
         let m = m.matrix();
         for c in 0..2 {
@@ -62,18 +60,25 @@ pub struct PoseBatch {
 }
 
 impl PoseBatch {
-    pub fn new(skeleton: &Skeleton, poses: &[Vec<JointTransform>], device: Device) -> PoseBatch {
+    /// Features of the joints `joints` and skinning matrices of every joint.
+    pub fn new(
+        skeleton: &Skeleton,
+        joints: &[usize],
+        poses: &[Vec<JointTransform>],
+        device: Device,
+    ) -> PoseBatch {
         let b = poses.len() as i64;
-        let mut features = Vec::with_capacity(poses.len() * feature_count(skeleton));
+        let width = PER_JOINT * joints.len();
+        let mut features = Vec::with_capacity(poses.len() * width);
         let mut skinning = Vec::with_capacity(poses.len() * 12 * skeleton.joint_count());
         for pose in poses {
             let rotations: Vec<_> = pose.iter().map(|t| t.rotation).collect();
-            features.extend(pose_features(skeleton, &rotations));
+            features.extend(pose_features(joints, &rotations));
             skinning.extend(skinning_rows(skeleton, pose));
         }
         PoseBatch {
             features: Tensor::from_slice(&features)
-                .view([b, feature_count(skeleton) as i64])
+                .view([b, width as i64])
                 .to_device(device),
             skinning: Tensor::from_slice(&skinning)
                 .view([b, skeleton.joint_count() as i64, 12])
@@ -131,13 +136,14 @@ mod tests {
             &[Vector3::zeros(), Vector3::y()],
         )
         .unwrap();
-        assert_eq!(feature_count(&s), 6);
+        let joints = non_root_joints(&s);
+        assert_eq!(joints, [1]);
         let mut rot = vec![UnitQuaternion::identity(); 2];
-        assert_eq!(pose_features(&s, &rot), vec![0.0; 6]);
+        assert_eq!(pose_features(&joints, &rot), vec![0.0; 6]);
         rot[0] = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 1.0);
-        assert_eq!(pose_features(&s, &rot), vec![0.0; 6]);
+        assert_eq!(pose_features(&joints, &rot), vec![0.0; 6]);
         rot[1] = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 1.0);
-        let f = pose_features(&s, &rot);
+        let f = pose_features(&joints, &rot);
         assert!((f[0] - (1f32.cos() - 1.0)).abs() < 1e-6 && (f[1] - 1f32.sin()).abs() < 1e-6);
     }
 }

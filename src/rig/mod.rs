@@ -5,6 +5,7 @@ pub mod animation;
 pub mod retarget;
 pub mod skeleton;
 pub mod skin;
+pub mod weights;
 
 pub use animation::SkelAnimation;
 pub use skeleton::{JointTransform, Skeleton};

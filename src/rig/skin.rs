@@ -1,7 +1,6 @@
 //! Linear blend skinning with a fixed number of influences per vertex (UsdSkel jointIndices /
 //! jointWeights, vertex-major), and the top-k pruning that keeps skins playable in engines.
 
-use crate::geometry::PointIndex;
 use nalgebra::{Matrix4, Point3, Vector3};
 
 #[derive(Clone, Debug, PartialEq)]
@@ -31,10 +30,13 @@ impl Skin {
                 list.push((fallback_joint, 1.0));
             }
             let weights = normalized(&list.iter().map(|(_, w)| *w).collect::<Vec<_>>());
-            let padding = std::iter::repeat_n((0, 0.0), influences - list.len());
-            for (j, w) in list.iter().map(|p| p.0).zip(weights).chain(padding) {
+            for (&(j, _), &w) in list.iter().zip(&weights) {
                 joint_indices.push(j);
                 joint_weights.push(w);
+            }
+            for _ in list.len()..influences {
+                joint_indices.push(0);
+                joint_weights.push(0.0);
             }
         }
         Skin {
@@ -73,53 +75,19 @@ impl Skin {
             .map(|(&j, &w)| (j as usize, w))
     }
 
-    /// The skin of the given vertices, in that order (subsets, seam duplicates).
-    pub fn select(&self, vertices: &[u32]) -> Skin {
-        let k = self.influences;
-        let range = |v: u32| v as usize * k..(v as usize + 1) * k;
-        Skin {
-            influences: k,
-            joint_indices: vertices
-                .iter()
-                .flat_map(|&v| self.joint_indices[range(v)].iter().copied())
-                .collect(),
-            joint_weights: vertices
-                .iter()
-                .flat_map(|&v| self.joint_weights[range(v)].iter().copied())
-                .collect(),
-        }
-    }
-
-    /// Weights for `points` by proximity to a skinned surface: the inverse-distance average of
-    /// the skins of the `neighbours` nearest surface points, pruned to `influences`. Averaging
-    /// several points matters: copying the single nearest body vertex tears a skirt between the
-    /// legs (neighbouring garment vertices jump between the two thighs).
-    pub fn transfer(
-        points: &[[f32; 3]],
-        surface: &Skin,
-        index: &PointIndex,
-        neighbours: usize,
-        influences: usize,
-    ) -> Skin {
-        // Keeps the weights finite for a point exactly on the surface.
-        const SOFTEN: f32 = 1.0e-3;
-        let per_vertex: Vec<Vec<(u16, f32)>> = points
+    /// Dense `[vertex][joint]` weights pruned to the `influences` largest per vertex.
+    pub fn from_dense(weights: &[Vec<f32>], influences: usize) -> Skin {
+        let sparse: Vec<Vec<(u16, f32)>> = weights
             .iter()
-            .map(|&p| {
-                let mut sum: Vec<(u16, f32)> = Vec::new();
-                for (b, d) in index.k_nearest(p, neighbours) {
-                    let s = 1.0 / (d + SOFTEN);
-                    for (j, w) in surface.vertex(b as usize) {
-                        match sum.iter_mut().find(|(k, _)| *k as usize == j) {
-                            Some(e) => e.1 += s * w,
-                            None => sum.push((j as u16, s * w)),
-                        }
-                    }
-                }
-                sum
+            .map(|w| {
+                w.iter()
+                    .enumerate()
+                    .filter(|(_, &x)| x > 0.0)
+                    .map(|(j, &x)| (j as u16, x))
+                    .collect()
             })
             .collect();
-        Skin::from_sparse(&per_vertex, influences, 0)
+        Skin::from_sparse(&sparse, influences, 0)
     }
 
     /// Blended skinning matrix of vertex `v`.

@@ -91,7 +91,7 @@ impl Fabric {
         };
         let fabric: Fabric =
             toml::from_str(&text).with_context(|| format!("{origin}: invalid fabric config"))?;
-        fabric.check().with_context(|| origin.to_string())?;
+        fabric.check().with_context(|| origin.clone())?;
         Ok(fabric)
     }
 

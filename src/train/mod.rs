@@ -14,9 +14,9 @@ use crate::models::file::{
     TrainingInfo, UvInfo, FORMAT, VERSION,
 };
 use crate::models::pbns::flat;
-use crate::models::pose_features::{feature_count, feature_joints, tensor_points, PoseBatch};
+use crate::models::pose_features::{tensor_points, PoseBatch, PER_JOINT};
 use crate::models::{Pbns, PbnsShape};
-use crate::rig::{SkelAnimation, Skin};
+use crate::rig::{weights, SkelAnimation};
 use anyhow::{bail, Result};
 use fabric::Fabric;
 use losses::{Cloth, TERM_NAMES};
@@ -24,6 +24,9 @@ use nearest::Correspondences;
 use poses::PoseSet;
 use std::time::{Duration, Instant};
 use tch::{Device, Kind, Tensor};
+
+/// Body vertices this close to the garment at rest (metres) are the parts it can touch.
+const TOUCH: f32 = 0.05;
 
 /// Training settings (the CLI's options).
 #[derive(Clone, Debug)]
@@ -53,6 +56,10 @@ pub struct Settings {
     pub device: Device,
     /// Learning rate of the skin logits relative to the network's.
     pub weights_lr_scale: f64,
+    /// Epochs between validation passes (the last epoch is always validated).
+    pub validate_every: usize,
+    /// Garment vertices farther than this from the body at rest get inpainted weights.
+    pub inpaint_beyond: Option<f32>,
 }
 
 impl Default for Settings {
@@ -76,6 +83,8 @@ impl Default for Settings {
             reach: 0.3,
             device: Device::Cpu,
             weights_lr_scale: 10.0,
+            validate_every: 5,
+            inpaint_beyond: Some(0.02),
         }
     }
 }
@@ -102,6 +111,8 @@ pub struct PhaseTimes {
     pub refresh: Duration,
     pub steps: usize,
     pub poses: usize,
+    /// Validation passes (not part of the step time).
+    pub validation: Duration,
 }
 
 impl PhaseTimes {
@@ -132,7 +143,6 @@ pub struct Trainer {
     validation_bodies: Vec<PosedBody>,
     geometry: ClothGeometry,
     adam: Adam,
-    pinned: Tensor,
     refreshed: bool,
     /// A candidate refresh running on a worker thread, applied at the next epoch.
     pending: Option<std::thread::JoinHandle<Vec<i64>>>,
@@ -168,14 +178,26 @@ impl Trainer {
         let device = settings.device;
         let rest = &garment.mesh.positions;
         let body_index = crate::geometry::PointIndex::new(&body.mesh.positions)?;
-        let lbs = Skin::transfer(
-            rest,
+        let (lbs, inpainted) = weights::garment_skin(
+            &garment.mesh,
             &body.skin,
+            body.skeleton.joint_count(),
             &body_index,
             settings.neighbours,
             settings.influences,
+            settings.inpaint_beyond,
         );
-        let joints = poses::garment_joints(&body.skeleton, &lbs, settings.joint_share);
+        // Joints that move the garment, or the body parts it can touch (a long skirt's hem
+        // meets the feet, whose weights are not on the skirt).
+        let touched = body.skin.subset(&nearest::body_subset(&body, rest, TOUCH));
+        let mut joints = poses::moving_joints(&body.skeleton, &lbs, settings.joint_share);
+        joints.extend(poses::moving_joints(
+            &body.skeleton,
+            &touched,
+            0.5 * settings.joint_share,
+        ));
+        joints.sort_unstable();
+        joints.dedup();
         let poses = poses::pose_set(
             &clips,
             joints,
@@ -191,14 +213,21 @@ impl Trainer {
             );
         }
         let shape = PbnsShape {
-            features: feature_count(&body.skeleton),
+            features: PER_JOINT * poses.joints.len(),
             width: settings.width,
             layers: settings.layers,
             vertices: rest.len(),
             joints: body.skeleton.joint_count(),
             influences: settings.influences,
         };
-        let mut model = Pbns::new(shape, rest, &lbs, &body.skeleton, device);
+        let mut model = Pbns::new(
+            shape,
+            poses.joints.clone(),
+            rest,
+            &lbs,
+            &body.skeleton,
+            device,
+        );
         model.set_trainable(settings.train_weights);
         let pinned_list = fabric
             .pinned
@@ -228,7 +257,7 @@ impl Trainer {
             format: FORMAT.into(),
             version: VERSION,
             shape,
-            skeleton: SkeletonInfo::new(&body.skeleton, feature_joints(&body.skeleton)),
+            skeleton: SkeletonInfo::new(&body.skeleton, poses.joints.clone()),
             garment: GarmentInfo {
                 name: garment.name.clone(),
                 vertices: rest.len(),
@@ -256,15 +285,15 @@ impl Trainer {
                 pose_threshold: settings.pose_threshold,
                 poses_train: poses.train.len(),
                 poses_validation: poses.validation.len(),
+                inpaint_beyond: settings.inpaint_beyond,
+                inpainted,
             },
             history: Vec::new(),
         };
         let adam = Adam::new(&model.parameters(settings.train_weights));
-        let pinned = Tensor::from_slice(&pinned_list.iter().map(|&v| v as i64).collect::<Vec<_>>())
-            .to_device(device);
         Ok(Trainer {
-            train: PoseBatch::new(&body.skeleton, &train_locals, device),
-            validation: PoseBatch::new(&body.skeleton, &validation_locals, device),
+            train: model.batch(&body.skeleton, &train_locals, device),
+            validation: model.batch(&body.skeleton, &validation_locals, device),
             validation_bodies: PosedBody::many(&body, &validation_locals),
             geometry: ClothGeometry::new(&garment.mesh, fabric.density),
             file: ModelFile {
@@ -281,7 +310,6 @@ impl Trainer {
             cloth,
             correspondences,
             adam,
-            pinned,
             refreshed: false,
             pending: None,
         })
@@ -338,7 +366,11 @@ impl Trainer {
         if fresh {
             self.refresh();
         }
-        if !fresh && self.epoch() % self.settings.refresh_every.max(1) == 0 {
+        if !fresh
+            && self
+                .epoch()
+                .is_multiple_of(self.settings.refresh_every.max(1))
+        {
             let x = self.predict_train();
             self.pending = Some(self.correspondences.spawn_refresh(x));
         }
@@ -403,11 +435,6 @@ impl Trainer {
             });
         }
         loss.backward();
-        if self.settings.train_weights && self.pinned.numel() > 0 {
-            // Pinned vertices keep their proximity weights (they are held at the skinned rest).
-            let mut g = self.file.model.logits.grad();
-            let _ = g.index_fill_(0, &self.pinned, 0.0);
-        }
         let named = self.model().parameters(self.settings.train_weights);
         // The skin logits move on another scale than the network (a weight going from 1e-4 to
         // 0.5 is a logit change of ~9): they get a larger learning rate.
@@ -474,17 +501,26 @@ impl Trainer {
                 collided_pct: 100.0 * m[7],
                 gravity_j: m[8],
             },
-            validation: self.validate(),
+            validation: self.validation_due(epoch + 1).then(|| self.validate()),
         };
         self.file.info.history.push(record.clone());
         self.file.info.training.epochs = self.epoch();
         Ok(record)
     }
 
+    /// Validation runs every `validate_every` epochs and after the last one.
+    fn validation_due(&self, epochs_done: usize) -> bool {
+        epochs_done.is_multiple_of(self.settings.validate_every.max(1))
+            || epochs_done >= self.settings.epochs
+    }
+
     /// Exact metrics on the validation poses.
-    pub fn validate(&self) -> Metrics {
+    pub fn validate(&mut self) -> Metrics {
+        let t = Instant::now();
         let x = predict(self.model(), &self.validation);
-        self.geometry.frames(&x, &self.validation_bodies)
+        let m = self.geometry.frames(&x, &self.validation_bodies);
+        self.times.validation += t.elapsed();
+        m
     }
 
     /// The model file with the current weights (no optimizer state).

@@ -16,6 +16,9 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use tch::{Device, Kind, Tensor};
 
+/// Points, normals and tree of the body subset in one pose.
+type PosedSubset = (Vec<[f32; 3]>, Vec<[f32; 3]>, PointIndex);
+
 pub struct Correspondences {
     /// Posed body vertices (the subset near the garment) of all poses, `[P * M, 3]`.
     points: Tensor,
@@ -44,7 +47,7 @@ impl Correspondences {
             .collect();
         let rest_n: Vec<[f32; 3]> = subset.iter().map(|&v| body.normals[v as usize]).collect();
         let skin = body.skin.subset(subset);
-        let posed: Vec<(Vec<[f32; 3]>, Vec<[f32; 3]>, PointIndex)> = poses
+        let posed: Vec<PosedSubset> = poses
             .par_iter()
             .map(|pose| {
                 let m = body.skeleton.skinning_matrices(pose);
@@ -54,7 +57,7 @@ impl Correspondences {
                 (p, n, tree)
             })
             .collect();
-        let flat = |f: &dyn Fn(&(Vec<[f32; 3]>, Vec<[f32; 3]>, PointIndex)) -> &Vec<[f32; 3]>| {
+        let flat = |f: &dyn Fn(&PosedSubset) -> &Vec<[f32; 3]>| {
             let v: Vec<f32> = posed
                 .iter()
                 .flat_map(|x| f(x).iter().flatten().copied())

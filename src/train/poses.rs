@@ -26,8 +26,9 @@ pub struct PoseSet {
     pub joints: Vec<usize>,
 }
 
-/// Joints (never a root) whose subtree carries at least `min_share` of the garment's skin weight.
-pub fn garment_joints(skeleton: &Skeleton, skin: &Skin, min_share: f32) -> Vec<usize> {
+/// Joints (never a root) whose subtree carries at least `min_share` of `skin`'s weight: the
+/// joints whose rotation moves those vertices.
+pub fn moving_joints(skeleton: &Skeleton, skin: &Skin, min_share: f32) -> Vec<usize> {
     let n = skeleton.joint_count();
     let mut subtree = vec![0.0f64; n];
     for v in 0..skin.vertex_count() {
