@@ -230,3 +230,75 @@ fn bake_is_deterministic_and_never_leaves_a_partial_file() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent-dir/x.glb"));
 }
+
+/// Raw little-endian f32 frames × points × 3, the reference format of tools/usd/check.py.
+fn write_f32(path: &Path, frames: &[Vec<[f32; 3]>], map: Option<&[u32]>) {
+    let mut bytes = Vec::new();
+    for frame in frames {
+        let points: Vec<[f32; 3]> = match map {
+            Some(m) => m.iter().map(|&v| frame[v as usize]).collect(),
+            None => frame.clone(),
+        };
+        for p in points.iter().flatten() {
+            bytes.extend_from_slice(&p.to_le_bytes());
+        }
+    }
+    std::fs::write(path, bytes).unwrap();
+}
+
+#[test]
+fn usd_bake_replays_the_network_in_usdskel_and_the_usd_cache_equals_the_pc2() {
+    let dir = out_dir("bake_usd");
+    let pc2 = reference(&dir);
+    let (_, frames) = exporters::pc2::read(&std::fs::read(&pc2).unwrap()).unwrap();
+    // The USD point cache of the same clip reads back equal to the PC2.
+    let usd_cache = dir.join("ref.usdc");
+    garmentbake_ok(&[
+        "eval",
+        "--model",
+        model().to_str().unwrap(),
+        "--motion",
+        s("motions/131_02.bvh"),
+        "--fps",
+        "30",
+        "--out",
+        usd_cache.to_str().unwrap(),
+    ]);
+    write_f32(&dir.join("ref.f32"), &frames, None);
+    let (ok, points) = usd_check(&[
+        "points",
+        usd_cache.to_str().unwrap(),
+        "--reference",
+        dir.join("ref.f32").to_str().unwrap(),
+    ]);
+    assert!(ok, "{points}");
+    eprintln!(
+        "USD cache vs PC2: max {} m over {} frames",
+        points["max_abs"], points["frames"]
+    );
+    assert!(points["max_abs"].as_f64().unwrap() <= 1e-5);
+    // UsdSkel's own skinning of the baked file against the network.
+    let usd = bake(&dir, "skirt.usdc", &[]);
+    let (valid, report) = usd_check(&["validate", usd.to_str().unwrap()]);
+    assert!(
+        valid && report["errors"].as_array().unwrap().is_empty(),
+        "{report}"
+    );
+    let map: Vec<u32> =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("map.json")).unwrap()).unwrap();
+    write_f32(&dir.join("ref_split.f32"), &frames, Some(&map));
+    let (ok, replay) = usd_check(&[
+        "replay",
+        usd.to_str().unwrap(),
+        "--mesh",
+        "garment",
+        "--reference",
+        dir.join("ref_split.f32").to_str().unwrap(),
+    ]);
+    assert!(ok, "{replay}");
+    eprintln!(
+        "UsdSkel replay vs eval: max {} mm over {} frames",
+        replay["max_mm"], replay["compared_frames"]
+    );
+    assert!(replay["max_mm"].as_f64().unwrap() <= 0.5);
+}

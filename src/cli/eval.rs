@@ -33,7 +33,8 @@ pub struct Args {
     /// Keep every n-th frame so the clip plays at this rate (must divide the source rate).
     #[arg(long)]
     fps: Option<f32>,
-    /// Output PC2 of the garment (one sample per frame, start frame 0).
+    /// Output point cache of the garment, one sample per frame: .pc2 (start frame 0), or
+    /// .usda/.usdc/.usdz (a Mesh with time-sampled points and extent).
     #[arg(long)]
     out: PathBuf,
     /// Also write the posed body as a PC2.
@@ -76,8 +77,7 @@ pub fn run(args: Args) -> Result<i32> {
     let lbs = lbs_frames(&model.lbs, &model.garment.positions, &body.skeleton, &poses);
     let geometry = ClothGeometry::new(&model.garment, model.info.fabric.density);
     let m = compare(&geometry, &[&garment, &lbs], &body, &poses);
-    exporters::pc2::write(&args.out, &garment, 0.0)
-        .with_context(|| format!("writing {}", args.out.display()))?;
+    write_cache(&args.out, &model.garment, &garment, anim.fps)?;
     if let Some(path) = &args.body_out {
         let frames: Vec<Vec<[f32; 3]>> = poses
             .iter()
@@ -86,8 +86,7 @@ pub fn run(args: Args) -> Result<i32> {
                     .skin_points(&body.mesh.positions, &body.skeleton.skinning_matrices(p))
             })
             .collect();
-        exporters::pc2::write(path, &frames, 0.0)
-            .with_context(|| format!("writing {}", path.display()))?;
+        write_cache(path, &body.mesh, &frames, anim.fps)?;
     }
     println!(
         "{}: {} frames at {} fps, {} garment vertices",
@@ -122,4 +121,30 @@ fn row(name: &str, m: &Metrics) -> String {
         "{name:<12} {:>10.3} {:>10.4} {:>13.2} {:>12.4}",
         m.edge_mm, m.bend, m.collided_pct, m.gravity_j
     )
+}
+
+/// A per-frame point cache: PC2 by default, USD (time-sampled `points`) for .usda/.usdc/.usdz.
+fn write_cache(
+    path: &std::path::Path,
+    mesh: &crate::geometry::TriMesh,
+    frames: &[Vec<[f32; 3]>],
+    fps: f32,
+) -> Result<()> {
+    let usd = exporters::Format::from_path(path) == Some(exporters::Format::Usd);
+    if !usd {
+        return exporters::pc2::write(path, frames, 0.0)
+            .with_context(|| format!("writing {}", path.display()));
+    }
+    let cache = exporters::PointCache {
+        name: path
+            .file_stem()
+            .map_or("cache".into(), |s| s.to_string_lossy().into_owned()),
+        fps,
+        triangles: mesh.triangles.clone(),
+        uvs: None,
+        point_count: mesh.vertex_count(),
+        points: frames.iter().flatten().copied().collect(),
+    };
+    exporters::write_point_cache(&cache, path)
+        .with_context(|| format!("writing {}", path.display()))
 }
