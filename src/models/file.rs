@@ -465,20 +465,14 @@ pub fn points_hash(points: &[[f32; 3]]) -> String {
 
 impl SkeletonInfo {
     pub fn new(skeleton: &Skeleton, feature_joints: Vec<usize>) -> SkeletonInfo {
+        // The same plain arrays the exporters get.
+        let plain = crate::bake::skeleton_asset(skeleton);
         SkeletonInfo {
-            joint_names: skeleton.joint_names.clone(),
-            parents: skeleton.parents.clone(),
-            rest_translations: skeleton.rest.iter().map(|r| r.translation.into()).collect(),
-            rest_rotations: skeleton
-                .rest
-                .iter()
-                .map(|r| r.rotation.coords.into())
-                .collect(),
-            inverse_bind_matrices: skeleton
-                .inverse_bind
-                .iter()
-                .map(|m| m.as_slice().try_into().expect("4x4"))
-                .collect(),
+            joint_names: plain.joint_names,
+            parents: plain.parents,
+            rest_translations: plain.rest_translations,
+            rest_rotations: plain.rest_rotations,
+            inverse_bind_matrices: plain.inverse_bind_matrices,
             feature_joints,
         }
     }
