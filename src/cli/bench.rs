@@ -49,7 +49,7 @@ pub fn run(args: Args) -> Result<i32> {
         trainer.step(&ids(s), 1e-4)?;
     }
     // One refresh cycle as training runs it: snapshot + worker thread during the steps of
-    // `refresh_every` epochs, then install.
+    // `refresh_every` epochs, then install (waiting for the worker if it is not done).
     let steps = match b.steps {
         0 => trainer.steps_per_epoch() * trainer.settings.refresh_every.max(1),
         s => s,

@@ -187,17 +187,7 @@ impl Trainer {
             settings.influences,
             settings.inpaint_beyond,
         );
-        // Joints that move the garment, or the body parts it can touch (a long skirt's hem
-        // meets the feet, whose weights are not on the skirt).
-        let touched = body.skin.subset(&nearest::body_subset(&body, rest, TOUCH));
-        let mut joints = poses::moving_joints(&body.skeleton, &lbs, settings.joint_share);
-        joints.extend(poses::moving_joints(
-            &body.skeleton,
-            &touched,
-            0.5 * settings.joint_share,
-        ));
-        joints.sort_unstable();
-        joints.dedup();
+        let joints = garment_joints(&body, rest, &lbs, settings.joint_share);
         let poses = poses::pose_set(
             &clips,
             joints,
@@ -229,17 +219,7 @@ impl Trainer {
             device,
         );
         model.set_trainable(settings.train_weights);
-        let pinned_list = fabric
-            .pinned
-            .clone()
-            .unwrap_or_else(|| garment.sidecar.pinned.clone());
-        if let Some(bad) = pinned_list.iter().find(|&&v| v as usize >= rest.len()) {
-            bail!(
-                "fabric '{}': pinned vertex {bad} out of range ({} vertices)",
-                fabric.name,
-                rest.len()
-            );
-        }
+        let pinned_list = pinned_vertices(&fabric, &garment)?;
         let cloth = Cloth::new(&garment.mesh, &fabric, &pinned_list, device)?;
         let locals = |set: &[poses::Pose]| set.iter().map(|p| p.local.clone()).collect::<Vec<_>>();
         let train_locals = locals(&poses.train);
@@ -253,43 +233,17 @@ impl Trainer {
             rest.len(),
             device,
         );
-        let info = ModelInfo {
-            format: FORMAT.into(),
-            version: VERSION,
+        let info = describe(
+            &body,
+            &garment,
+            &fabric,
+            &settings,
+            &poses,
             shape,
-            skeleton: SkeletonInfo::new(&body.skeleton, poses.joints.clone()),
-            garment: GarmentInfo {
-                name: garment.name.clone(),
-                vertices: rest.len(),
-                faces: garment.mesh.triangles.clone(),
-                uv: garment.mesh.uv.as_ref().map(|uv| UvInfo {
-                    coords: uv.coords.clone(),
-                    triangles: uv.triangles.clone(),
-                }),
-                pinned: pinned_list.clone(),
-                rest_hash: points_hash(rest),
-            },
-            body: BodyInfo {
-                name: body.name.clone(),
-                vertices: body.mesh.vertex_count(),
-                rest_hash: points_hash(&body.mesh.positions),
-            },
-            fabric: fabric.clone(),
-            training: TrainingInfo {
-                seed: settings.seed,
-                epochs: 0,
-                batch: settings.batch,
-                learning_rate: settings.learning_rate,
-                train_weights: settings.train_weights,
-                motions: motion_names,
-                pose_threshold: settings.pose_threshold,
-                poses_train: poses.train.len(),
-                poses_validation: poses.validation.len(),
-                inpaint_beyond: settings.inpaint_beyond,
-                inpainted,
-            },
-            history: Vec::new(),
-        };
+            &pinned_list,
+            motion_names,
+            inpainted,
+        );
         let adam = Adam::new(&model.parameters(settings.train_weights));
         Ok(Trainer {
             train: model.batch(&body.skeleton, &train_locals, device),
@@ -351,28 +305,24 @@ impl Trainer {
         predict(self.model(), &self.train)
     }
 
-    /// Candidate upkeep at the start of an epoch. A refresh due at epoch `e` (every
-    /// `refresh_every` epochs) snapshots the model's output now and queries the k-d trees on a
-    /// worker thread while epoch `e` trains; its lists are installed at the start of epoch
-    /// `e + 1`. The first epoch of a run refreshes synchronously. Deterministic: snapshots and
-    /// installs happen at fixed epochs.
+    /// Candidate upkeep at the start of an epoch. Every `refresh_every` epochs the model's
+    /// output is snapshot and the k-d trees are queried on a worker thread while training goes
+    /// on; the lists are installed at the next due epoch, so the worker has `refresh_every`
+    /// epochs of steps to finish and the training thread rarely waits. The first epoch of a
+    /// run refreshes synchronously. Deterministic: snapshots and installs happen at fixed epochs.
     fn upkeep(&mut self) {
         let t = Instant::now();
-        if let Some(job) = self.pending.take() {
-            let lists = job.join().expect("candidate refresh worker panicked");
-            self.correspondences.apply(lists);
-        }
         let fresh = !self.refreshed;
         if fresh {
             self.refresh();
         }
-        if !fresh
-            && self
+        if fresh
+            || self
                 .epoch()
                 .is_multiple_of(self.settings.refresh_every.max(1))
         {
-            let x = self.predict_train();
-            self.pending = Some(self.correspondences.spawn_refresh(x));
+            self.finish_refresh();
+            self.start_refresh();
         }
         self.times.refresh += t.elapsed();
     }
@@ -567,6 +517,91 @@ impl Trainer {
         self.adam.restore(&params, &checkpoint.extra)?;
         self.refreshed = false;
         Ok(())
+    }
+}
+
+/// Joints that move the garment, or the body parts it can touch (a long skirt's hem meets the
+/// feet, whose weights are not on the skirt): the pose-balancing joints and the MLP inputs.
+fn garment_joints(
+    body: &Body,
+    rest: &[[f32; 3]],
+    skin: &crate::rig::Skin,
+    share: f32,
+) -> Vec<usize> {
+    let touched = body.skin.subset(&nearest::body_subset(body, rest, TOUCH));
+    let mut joints = poses::moving_joints(&body.skeleton, skin, share);
+    joints.extend(poses::moving_joints(&body.skeleton, &touched, 0.5 * share));
+    joints.sort_unstable();
+    joints.dedup();
+    joints
+}
+
+/// The fabric's pin set, else the garment sidecar's; checked against the vertex count.
+fn pinned_vertices(fabric: &Fabric, garment: &Garment) -> Result<Vec<u32>> {
+    let pinned = fabric
+        .pinned
+        .clone()
+        .unwrap_or_else(|| garment.sidecar.pinned.clone());
+    let n = garment.mesh.vertex_count();
+    if let Some(bad) = pinned.iter().find(|&&v| v as usize >= n) {
+        bail!(
+            "fabric '{}': pinned vertex {bad} out of range ({n} vertices)",
+            fabric.name
+        );
+    }
+    Ok(pinned)
+}
+
+/// The model description written into the file's metadata (no history yet).
+#[allow(clippy::too_many_arguments)]
+fn describe(
+    body: &Body,
+    garment: &Garment,
+    fabric: &Fabric,
+    settings: &Settings,
+    poses: &PoseSet,
+    shape: PbnsShape,
+    pinned_list: &[u32],
+    motion_names: Vec<String>,
+    inpainted: usize,
+) -> ModelInfo {
+    let rest = &garment.mesh.positions;
+    ModelInfo {
+        format: FORMAT.into(),
+        version: VERSION,
+        shape,
+        skeleton: SkeletonInfo::new(&body.skeleton, poses.joints.clone()),
+        garment: GarmentInfo {
+            name: garment.name.clone(),
+            vertices: rest.len(),
+            faces: garment.mesh.triangles.clone(),
+            uv: garment.mesh.uv.as_ref().map(|uv| UvInfo {
+                coords: uv.coords.clone(),
+                triangles: uv.triangles.clone(),
+            }),
+            pinned: pinned_list.to_vec(),
+            rest_hash: points_hash(rest),
+        },
+        body: BodyInfo {
+            name: body.name.clone(),
+            vertices: body.mesh.vertex_count(),
+            rest_hash: points_hash(&body.mesh.positions),
+        },
+        fabric: fabric.clone(),
+        training: TrainingInfo {
+            seed: settings.seed,
+            epochs: 0,
+            batch: settings.batch,
+            learning_rate: settings.learning_rate,
+            train_weights: settings.train_weights,
+            motions: motion_names,
+            pose_threshold: settings.pose_threshold,
+            poses_train: poses.train.len(),
+            poses_validation: poses.validation.len(),
+            inpaint_beyond: settings.inpaint_beyond,
+            inpainted,
+        },
+        history: Vec::new(),
     }
 }
 
