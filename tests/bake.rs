@@ -126,60 +126,46 @@ fn threejs_max_error(glb: &Path, dir: &Path, frames: usize) -> f64 {
 
 const FRAMES_131_02_AT_30: usize = 312;
 
+/// Bakes with `args`, validates the file, and checks three.js's replay of every frame against the
+/// network within `limit_m`.
+fn threejs_case(test: &str, args: &[&str], limit_m: f64) {
+    let dir = out_dir(test);
+    reference(&dir);
+    let glb = bake(&dir, "out.glb", args);
+    let (ok, report) = khronos_validate(&glb);
+    assert!(ok, "{report}");
+    let err = threejs_max_error(&glb, &dir, FRAMES_131_02_AT_30);
+    eprintln!(
+        "{test} {args:?}: three.js vs eval, every frame: max {:.4} mm",
+        err * 1e3
+    );
+    assert!(err <= limit_m, "max error {:.4} mm", err * 1e3);
+}
+
 // three.js (r170) reads JOINTS_0/WEIGHTS_0 only: it plays at most 4 influences, so the
 // independent check of 8-influence files is Blender's (below) and USD's.
 #[test]
 fn full_basis_replays_the_network_in_threejs() {
-    let dir = out_dir("bake_full");
-    reference(&dir);
-    let glb = bake(&dir, "full.glb", &[]);
-    let (ok, report) = khronos_validate(&glb);
-    assert!(ok, "{report}");
-    let err = threejs_max_error(&glb, &dir, FRAMES_131_02_AT_30);
-    eprintln!(
-        "full basis, 4 influences: three.js vs eval, every frame: max {:.4} mm",
-        err * 1e3
-    );
-    assert!(err <= 0.5e-3, "max error {:.4} mm", err * 1e3);
+    threejs_case("bake_full", &[], 0.5e-3);
 }
 
 #[test]
 fn compressed_to_a_tolerance_stays_within_it_in_threejs() {
-    let dir = out_dir("bake_tolerance");
-    reference(&dir);
-    let glb = bake(
-        &dir,
-        "tol.glb",
+    threejs_case(
+        "bake_tolerance",
         &["--influences", "4", "--tolerance-mm", "1"],
+        1e-3,
     );
-    let (ok, report) = khronos_validate(&glb);
-    assert!(ok, "{report}");
-    let err = threejs_max_error(&glb, &dir, FRAMES_131_02_AT_30);
-    eprintln!(
-        "--influences 4 --tolerance-mm 1: three.js vs eval, every frame: max {:.4} mm",
-        err * 1e3
-    );
-    assert!(err <= 1e-3, "max error {:.4} mm", err * 1e3);
 }
 
 #[test]
 fn pruning_8_influences_to_4_is_compensated_within_the_tolerance_in_threejs() {
     INFLUENCES.with(|i| i.set(8));
-    let dir = out_dir("bake_pruned");
-    reference(&dir);
-    let glb = bake(
-        &dir,
-        "pruned.glb",
+    threejs_case(
+        "bake_pruned",
         &["--influences", "4", "--tolerance-mm", "1"],
+        1e-3,
     );
-    let (ok, report) = khronos_validate(&glb);
-    assert!(ok, "{report}");
-    let err = threejs_max_error(&glb, &dir, FRAMES_131_02_AT_30);
-    eprintln!(
-        "8 → 4 influences, --tolerance-mm 1: three.js vs eval, every frame: max {:.4} mm",
-        err * 1e3
-    );
-    assert!(err <= 1e-3, "max error {:.4} mm", err * 1e3);
 }
 
 #[test]
