@@ -25,6 +25,11 @@ pub struct Metrics {
     pub bend: f64,
     /// Percentage of vertices inside the body (d·n < 0 w.r.t. the nearest body vertex).
     pub collided_pct: f64,
+    /// The part of `collided_pct` whose nearest body vertex is itself inside the body (the body
+    /// overlaps itself there, e.g. a bowed head's chin sunk into the chest): no garment can be
+    /// outside both parts. Computed against posed bodies only (0 in training-step metrics).
+    #[serde(default)]
+    pub collided_overlap_pct: f64,
     /// Gravitational potential energy Σ m g y, joules.
     pub gravity_j: f64,
 }
@@ -37,6 +42,7 @@ impl Metrics {
             edge_mm: sum(|m| m.edge_mm),
             bend: sum(|m| m.bend),
             collided_pct: sum(|m| m.collided_pct),
+            collided_overlap_pct: sum(|m| m.collided_overlap_pct),
             gravity_j: sum(|m| m.gravity_j),
         }
     }
@@ -86,6 +92,11 @@ impl ClothGeometry {
             .sum();
         let offsets = body_offsets(x, &body.points, &body.normals, &body.index);
         let inside = offsets.iter().filter(|&&d| d < 0.0).count();
+        let at_overlap = x
+            .iter()
+            .zip(&offsets)
+            .filter(|(p, &d)| d < 0.0 && body.overlap[body.index.nearest(**p).0 as usize])
+            .count();
         let gravity: f64 = x
             .iter()
             .zip(&self.mass)
@@ -95,6 +106,7 @@ impl ClothGeometry {
             edge_mm: 1e3 * edge / self.edges.len().max(1) as f64,
             bend: bend / self.hinges.len().max(1) as f64,
             collided_pct: 100.0 * inside as f64 / x.len().max(1) as f64,
+            collided_overlap_pct: 100.0 * at_overlap as f64 / x.len().max(1) as f64,
             gravity_j: gravity,
         }
     }
@@ -120,6 +132,40 @@ pub struct PosedBody {
     pub points: Vec<[f32; 3]>,
     pub normals: Vec<[f32; 3]>,
     pub index: PointIndex,
+    /// Vertices inside another part of the body (see [`self_overlap`]).
+    pub overlap: Vec<bool>,
+}
+
+/// Body vertices closer than this at rest are the same part of the surface.
+const SAME_PART: f32 = 0.1;
+/// How deep inside another part a vertex can be found.
+const OVERLAP_REACH: f32 = 0.05;
+
+/// Which posed body vertices lie inside another part of the body: behind (d·n < 0) the nearest
+/// posed vertex within [`OVERLAP_REACH`] that was farther than [`SAME_PART`] at rest. Skinning
+/// lets limbs pass through each other (a chin into the chest when the head bows far); in
+/// ordinary poses every close vertex was close at rest too, and nothing is flagged.
+pub fn self_overlap(
+    rest: &[[f32; 3]],
+    points: &[[f32; 3]],
+    normals: &[[f32; 3]],
+    index: &PointIndex,
+) -> Vec<bool> {
+    let v3 = |p: [f32; 3]| nalgebra::Vector3::from(p);
+    (0..points.len())
+        .into_par_iter()
+        .map(|v| {
+            let other = index
+                .within(points[v], OVERLAP_REACH)
+                .into_iter()
+                .filter(|&(u, _)| (v3(rest[u as usize]) - v3(rest[v])).norm() > SAME_PART)
+                .min_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+            other.is_some_and(|(u, _)| {
+                let u = u as usize;
+                (v3(points[v]) - v3(points[u])).dot(&v3(normals[u])) < 0.0
+            })
+        })
+        .collect()
 }
 
 impl PosedBody {
@@ -128,10 +174,12 @@ impl PosedBody {
         let points = body.skin.skin_points(&body.mesh.positions, &skinning);
         let normals = body.skin.skin_normals(&body.normals, &skinning);
         let index = PointIndex::new(&points).expect("a posed body is finite and non-empty");
+        let overlap = self_overlap(&body.mesh.positions, &points, &normals, &index);
         PosedBody {
             points,
             normals,
             index,
+            overlap,
         }
     }
 

@@ -521,3 +521,151 @@ fn a_blown_up_loss_stops_and_names_the_term() {
     );
     assert!(!out.exists());
 }
+
+fn clip(name: &str) -> garmentbake::rig::SkelAnimation {
+    let b = body();
+    load_clip(
+        &sample(&format!("motions/{name}")),
+        &[],
+        &b.skeleton,
+        Some(30.0),
+    )
+    .unwrap()
+    .animation
+}
+
+#[test]
+fn balanced_poses_differ_by_the_threshold_and_recombined_ones_mix_real_limbs() {
+    use garmentbake::train::poses::{balanced, limb_chains, pose_set, recombined};
+    let b = body();
+    let sk = &b.skeleton;
+    let j = |n: &str| sk.joint_names.iter().position(|x| x == n).unwrap();
+    let chains = limb_chains(sk);
+    assert_eq!(chains[j("Hips")], None);
+    assert_eq!(chains[j("LeftArm")], Some(j("LeftShoulder")));
+    assert_eq!(chains[j("Head")], Some(j("Neck")));
+    assert_eq!(chains[j("Spine1")], Some(j("LowerBack")));
+    assert_eq!(chains[j("LeftFoot")], Some(j("LHipJoint")));
+
+    let clips = vec![clip("131_01.bvh"), clip("01_01.bvh")];
+    let joints: Vec<usize> = ["Spine", "Neck1", "LeftArm", "RightArm"]
+        .iter()
+        .map(|n| j(n))
+        .collect();
+    let kept = balanced(&clips, &joints, 0.3);
+    assert!(kept.len() > 10 && kept.len() < 300, "{} poses", kept.len());
+    let axis = |(c, f): (usize, usize), k: usize| clips[c].rotations[f][k].scaled_axis();
+    for (a, &p) in kept.iter().enumerate() {
+        for &q in &kept[..a] {
+            let far = joints
+                .iter()
+                .any(|&k| (axis(p, k) - axis(q, k)).amax() >= 0.3);
+            assert!(far, "{p:?} and {q:?} are within the threshold");
+        }
+    }
+
+    let set = pose_set(&clips, joints, 0.3, 0.15, 7);
+    let mixed = recombined(&set.train, sk, 50, 0.0, 7);
+    assert_eq!(mixed.len(), 50);
+    assert_eq!(mixed, recombined(&set.train, sk, 50, 0.0, 7), "seeded");
+    let starts: Vec<usize> = (0..chains.len())
+        .filter(|&k| chains[k] == Some(k))
+        .collect();
+    let mut donors_differ = 0;
+    for m in &mixed {
+        assert!(m.recombined);
+        // Every limb chain is one real pose's chain, rotation for rotation.
+        let mut sources = Vec::new();
+        for &s in &starts {
+            let members: Vec<usize> = (0..chains.len())
+                .filter(|&k| chains[k] == Some(s))
+                .collect();
+            let donor = set.train.iter().position(|r| {
+                members
+                    .iter()
+                    .all(|&k| r.local[k].rotation == m.local[k].rotation)
+            });
+            sources.push(donor.expect("a chain copied from a real pose"));
+        }
+        donors_differ += usize::from(sources.iter().any(|&d| d != sources[0]));
+        // The root (global orientation and translation) comes whole from one real pose.
+        let root = &m.local[j("Hips")];
+        assert!(set.train.iter().any(|r| r.local[j("Hips")] == *root));
+    }
+    assert!(donors_differ > 40, "only {donors_differ} of 50 mix frames");
+
+    // Amplified: every chain bends one common gain in [1, 1.3] further from rest than a real
+    // pose's same chain.
+    let deviation =
+        |k: usize, q: &nalgebra::UnitQuaternion<f32>| (sk.rest[k].rotation.inverse() * q).angle();
+    let mut stretched = 0;
+    for m in &recombined(&set.train, sk, 20, 0.3, 7) {
+        for &s in &starts {
+            let members: Vec<usize> = (0..chains.len())
+                .filter(|&k| chains[k] == Some(s))
+                .collect();
+            let fits = set.train.iter().any(|r| {
+                let gains: Vec<f32> = members
+                    .iter()
+                    .filter(|&&k| deviation(k, &r.local[k].rotation) > 0.05)
+                    .map(|&k| {
+                        deviation(k, &m.local[k].rotation) / deviation(k, &r.local[k].rotation)
+                    })
+                    .collect();
+                gains
+                    .iter()
+                    .all(|g| (g - gains[0]).abs() < 2e-3 && (0.999..=1.301).contains(g))
+                    && !gains.is_empty()
+            });
+            let still = members
+                .iter()
+                .all(|&k| deviation(k, &m.local[k].rotation) <= 0.05 * 1.3 + 1e-4);
+            assert!(
+                fits || still,
+                "chain at {} is no amplified real chain",
+                sk.joint_names[s]
+            );
+            stretched += usize::from(fits && !still);
+        }
+    }
+    assert!(stretched > 20, "{stretched} chains amplified");
+}
+
+#[test]
+fn a_head_bowed_into_the_chest_is_flagged_as_body_overlap() {
+    use garmentbake::eval::PosedBody;
+    use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
+    let b = body();
+    let sk = &b.skeleton;
+    let flagged = |pose: &[garmentbake::rig::JointTransform]| {
+        let posed = PosedBody::new(b, pose);
+        (0..posed.overlap.len())
+            .filter(|&v| posed.overlap[v])
+            .collect::<Vec<_>>()
+    };
+    let at_rest = flagged(&sk.rest);
+    assert!(at_rest.len() < 10, "{} flagged at rest", at_rest.len());
+
+    // Bow the head 1.6 rad forward (about world +X: the body faces +Z) at the upper neck.
+    let j = sk.joint_index("Neck1").unwrap();
+    let world: Matrix3<f32> = sk.rest_world()[j].fixed_view::<3, 3>(0, 0).into();
+    let g = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix(&world));
+    let bow = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 1.6);
+    let mut pose = sk.rest.clone();
+    pose[j].rotation = sk.rest[j].rotation * (g.inverse() * bow * g);
+    let bowed = flagged(&pose);
+    let head = sk.joint_index("Head").unwrap();
+    let dominant = |v: usize| {
+        b.skin
+            .vertex(v)
+            .max_by(|x, y| x.1.total_cmp(&y.1))
+            .unwrap()
+            .0
+    };
+    let in_head = bowed.iter().filter(|&&v| dominant(v) == head).count();
+    assert!(
+        in_head > 200,
+        "{in_head} head vertices of {} flagged",
+        bowed.len()
+    );
+}

@@ -20,15 +20,8 @@ pub struct Args {
     /// Trained model (.safetensors from `garmentbake train`).
     #[arg(long)]
     model: PathBuf,
-    /// BVH clip(s); one animation each.
-    #[arg(long = "motion", required = true)]
-    motions: Vec<PathBuf>,
-    /// Joint-name map(s) (TOML); each applies to the clips whose joints it covers.
-    #[arg(long = "map")]
-    maps: Vec<PathBuf>,
-    /// Keep every n-th frame so clips play at this rate (must divide the source rate).
-    #[arg(long)]
-    fps: Option<f32>,
+    #[command(flatten)]
+    clips: super::ClipArgs,
     /// Output: .glb / .gltf (glTF 2.0) or .usda / .usdc / .usdz (UsdSkel).
     #[arg(long)]
     out: PathBuf,
@@ -56,11 +49,12 @@ pub fn run(args: Args) -> Result<i32> {
     set_threads(2, 2);
     let device = parse_device(&args.device)?;
     let model = file::load(&args.model, device)?;
-    let maps = read_maps(&args.maps)?;
+    let maps = read_maps(&args.clips.maps)?;
     let clips = args
+        .clips
         .motions
         .iter()
-        .map(|p| load_clip(p, &maps, model.skeleton(), args.fps).map(|c| c.animation))
+        .map(|p| load_clip(p, &maps, model.skeleton(), args.clips.fps).map(|c| c.animation))
         .collect::<Result<Vec<_>>>()?;
     let targets = match (args.max_targets, args.tolerance_mm) {
         (Some(0), _) => bail!("--max-targets must be at least 1"),

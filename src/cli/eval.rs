@@ -15,7 +15,9 @@ use std::path::PathBuf;
 /// proximity weights (the same garment without the network).
 ///
 /// Metrics: edge error (mean |e − e_T|, mm), bending (mean 1 − cos between neighbouring face
-/// normals), collided vertices (% with d·n < 0 against the nearest body vertex) and gravity energy.
+/// normals), collided vertices (% with d·n < 0 against the nearest body vertex; "of which body
+/// overlap": those whose nearest body vertex is itself inside another part of the skinned body,
+/// e.g. a chin sunk into the chest, where no garment can be outside both) and gravity energy.
 #[derive(clap::Args)]
 pub struct Args {
     /// Trained model (.safetensors from `garmentbake train`).
@@ -96,8 +98,8 @@ pub fn run(args: Args) -> Result<i32> {
         model.model.shape.vertices
     );
     println!(
-        "{:<12} {:>10} {:>10} {:>13} {:>12}",
-        "", "edge (mm)", "bend", "collided (%)", "gravity (J)"
+        "{:<12} {:>10} {:>10} {:>13} {:>22} {:>12}",
+        "", "edge (mm)", "bend", "collided (%)", "of which body overlap", "gravity (J)"
     );
     for (name, x) in [("model", &m[0]), ("plain LBS", &m[1])] {
         println!("{}", row(name, x));
@@ -118,8 +120,8 @@ pub fn run(args: Args) -> Result<i32> {
 
 fn row(name: &str, m: &Metrics) -> String {
     format!(
-        "{name:<12} {:>10.3} {:>10.4} {:>13.2} {:>12.4}",
-        m.edge_mm, m.bend, m.collided_pct, m.gravity_j
+        "{name:<12} {:>10.3} {:>10.4} {:>13.2} {:>22.2} {:>12.4}",
+        m.edge_mm, m.bend, m.collided_pct, m.collided_overlap_pct, m.gravity_j
     )
 }
 

@@ -9,6 +9,21 @@ mod preview;
 mod train;
 
 use clap::{Parser, Subcommand};
+use std::path::PathBuf;
+
+/// The motion-capture clips a command reads, and how (shared by `pose` and `bake`).
+#[derive(clap::Args)]
+struct ClipArgs {
+    /// BVH clip(s); repeat --motion for several, one animation each.
+    #[arg(long = "motion", required = true)]
+    motions: Vec<PathBuf>,
+    /// Joint-name map(s) (TOML); each applies to the clips whose joints it covers.
+    #[arg(long = "map")]
+    maps: Vec<PathBuf>,
+    /// Keep every n-th frame so clips play at this rate (must divide the source rate).
+    #[arg(long)]
+    fps: Option<f32>,
+}
 
 #[derive(Parser)]
 #[command(

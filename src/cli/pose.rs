@@ -17,15 +17,8 @@ pub struct Args {
     /// Skinned body (glTF/glb): the mesh, its skin and skeleton.
     #[arg(long)]
     body: PathBuf,
-    /// BVH clip(s); repeat for several animations in one file.
-    #[arg(long = "motion", required = true)]
-    motions: Vec<PathBuf>,
-    /// Joint-name map(s) (TOML); each applies to the clips whose joints it covers.
-    #[arg(long = "map")]
-    maps: Vec<PathBuf>,
-    /// Keep every n-th frame so the clip plays at this rate (must divide the source rate).
-    #[arg(long)]
-    fps: Option<f32>,
+    #[command(flatten)]
+    clips: super::ClipArgs,
     /// Output .glb (binary) or .gltf (+ .bin); .usda, .usdc or .usdz (UsdSkel, through usd-core).
     #[arg(long)]
     out: PathBuf,
@@ -36,7 +29,7 @@ pub struct Args {
 
 pub fn run(args: Args) -> Result<i32> {
     let body = read_body(&args.body)?;
-    let maps = read_maps(&args.maps)?;
+    let maps = read_maps(&args.clips.maps)?;
     let mut asset = exporters::BakedAsset {
         skeleton: skeleton_asset(&body.skeleton),
         meshes: vec![skinned_mesh_asset(
@@ -53,13 +46,13 @@ pub fn run(args: Args) -> Result<i32> {
         .push(("body".into(), args.body.display().to_string()));
     let mut report = Vec::new();
     let bar = super::progress(
-        args.motions.len() as u64,
+        args.clips.motions.len() as u64,
         "retarget",
-        args.json || args.motions.len() < 2,
+        args.json || args.clips.motions.len() < 2,
     );
-    for path in &args.motions {
+    for path in &args.clips.motions {
         bar.inc(1);
-        let clip = load_clip(path, &maps, &body.skeleton, args.fps)?;
+        let clip = load_clip(path, &maps, &body.skeleton, args.clips.fps)?;
         let a = &clip.animation;
         if !args.json {
             println!(

@@ -57,7 +57,7 @@ pub struct InputArgs {
     /// Joint-name map(s) for the clips (TOML).
     #[arg(long = "map")]
     pub maps: Vec<PathBuf>,
-    /// Fabric: a FABRIC.toml or a preset name (cotton, silk, denim).
+    /// Fabric: a FABRIC.toml or a preset name (cotton, silk, denim, jersey).
     #[arg(long, default_value = "cotton")]
     pub config: String,
     /// Seed: same seed and inputs → byte-identical model.
@@ -84,6 +84,10 @@ pub struct InputArgs {
     /// Pose balancing threshold (radians, per rotation component of the garment's joints).
     #[arg(long, default_value_t = 0.15)]
     pub pose_threshold: f32,
+    /// Extra training poses per balanced one, each taking every limb chain (legs, spine, neck and
+    /// head, arms) from a different real frame: covers pose combinations the clips lack.
+    #[arg(long, default_value_t = 0)]
+    pub recombine: usize,
     /// Epochs between refreshes of the nearest-body-vertex candidates.
     #[arg(long, default_value_t = 2)]
     pub refresh_every: usize,
@@ -138,6 +142,7 @@ impl InputArgs {
             train_weights: !self.fixed_weights,
             seed: self.seed,
             pose_threshold: self.pose_threshold,
+            recombine: self.recombine,
             refresh_every: self.refresh_every,
             candidates: self.candidates.max(1),
             weights_lr_scale: self.weights_lr_scale,
@@ -258,11 +263,12 @@ pub fn run(args: Args) -> Result<i32> {
             .iter()
             .map(|&j| trainer.file.body.skeleton.joint_names[j].as_str())
             .collect();
+        let recombined = p.train.iter().filter(|x| x.recombined).count();
         println!(
-            "poses: {} balanced of {} frames ({} train, {} validation; threshold {} rad on {})",
-            p.train.len() + p.validation.len(),
+            "poses: {} balanced of {} frames ({} train + {recombined} recombined, {} validation; threshold {} rad on {})",
+            p.train.len() - recombined + p.validation.len(),
             p.frames_seen,
-            p.train.len(),
+            p.train.len() - recombined,
             p.validation.len(),
             trainer.settings.pose_threshold,
             names.join(", ")

@@ -115,6 +115,20 @@ impl PointIndex {
             .map(|hit| self.duplicates[hit.item as usize][0])
     }
 
+    /// Every point within `radius` of `p` (duplicates included) with its distance, unordered.
+    pub fn within(&self, p: [f32; 3], radius: f32) -> Vec<(u32, f32)> {
+        self.tree
+            .within_unsorted::<SquaredEuclidean>(&p, radius * radius)
+            .iter()
+            .flat_map(|hit| {
+                let d = hit.distance.sqrt();
+                self.duplicates[hit.item as usize]
+                    .iter()
+                    .map(move |&i| (i, d))
+            })
+            .collect()
+    }
+
     /// [`PointIndex::nearest`] for each query point, in order.
     pub fn nearest_many(&self, points: &[[f32; 3]]) -> Vec<(u32, f32)> {
         points.iter().map(|&p| self.nearest(p)).collect()

@@ -91,6 +91,9 @@ pub struct TrainingInfo {
     pub pose_threshold: f32,
     pub poses_train: usize,
     pub poses_validation: usize,
+    /// Training poses made by recombining limb chains of real frames (part of `poses_train`).
+    #[serde(default)]
+    pub poses_recombined: usize,
     /// Initial weights were inpainted beyond this distance from the body (metres).
     pub inpaint_beyond: Option<f32>,
     /// Vertices whose initial weights were inpainted.

@@ -56,6 +56,11 @@ pub fn has_glyph(c: char) -> bool {
     glyph(c).is_some()
 }
 
+/// Width in pixels of `text` drawn at `scale`.
+pub fn text_width(text: &str, scale: u32) -> u32 {
+    text.chars().count() as u32 * ADVANCE * scale.max(1)
+}
+
 /// Draw `text` with its top-left corner at (`x`, `y`), each font pixel `scale`×`scale`
 /// image pixels; clipped to the image. Returns the width drawn, in image pixels.
 pub fn draw_text(

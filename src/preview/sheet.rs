@@ -1,6 +1,6 @@
 //! Panels (one view of some meshes) and contact sheets (a grid of panels).
 
-use super::font::draw_text;
+use super::font::{draw_text, text_width};
 use super::framing::{Framing, FramingMode, View};
 use super::raster::{Camera, Target};
 use super::{Panel, SheetOptions};
@@ -52,12 +52,15 @@ pub fn render_panel_with(panel: &Panel, framing: &Framing, opts: &SheetOptions) 
     target.outline(OUTLINE_DEPTH.max(4.0 / cam.scale()));
     let mut img = target.downsample(ss);
     let ink = text_color(opts.background);
+    // A label too long for the panel at the normal size is drawn at half size, not clipped.
+    let fits = text_width(&panel.label, LABEL_SCALE) + 2 * LABEL_MARGIN <= w;
+    let scale = if fits { LABEL_SCALE } else { 1 };
     draw_text(
         &mut img,
         &panel.label,
         LABEL_MARGIN,
         LABEL_MARGIN,
-        LABEL_SCALE,
+        scale,
         ink,
     );
     img

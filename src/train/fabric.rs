@@ -16,10 +16,11 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// Presets compiled in, so `--config NAME` works anywhere.
-pub const PRESETS: [(&str, &str); 3] = [
+pub const PRESETS: [(&str, &str); 4] = [
     ("cotton", include_str!("../../samples/fabrics/cotton.toml")),
     ("silk", include_str!("../../samples/fabrics/silk.toml")),
     ("denim", include_str!("../../samples/fabrics/denim.toml")),
+    ("jersey", include_str!("../../samples/fabrics/jersey.toml")),
 ];
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -143,6 +144,9 @@ mod tests {
             assert_eq!(f.margin, 0.004);
         }
         let err = Fabric::load("tweed").unwrap_err().to_string();
-        assert!(err.contains("presets: cotton, silk, denim"), "{err}");
+        assert!(
+            err.contains("presets: cotton, silk, denim, jersey"),
+            "{err}"
+        );
     }
 }

@@ -45,6 +45,8 @@ pub struct Settings {
     /// A joint is compared for pose balancing if its subtree carries this share of the skin.
     pub joint_share: f32,
     pub validation: f32,
+    /// Recombined training poses per real one (limb chains from different frames).
+    pub recombine: usize,
     /// Body vertices averaged for the proximity weights.
     pub neighbours: usize,
     /// Candidate body vertices per garment vertex.
@@ -77,6 +79,7 @@ impl Default for Settings {
             pose_threshold: 0.2,
             joint_share: 0.01,
             validation: 0.15,
+            recombine: 0,
             neighbours: 8,
             candidates: 8,
             refresh_every: 2,
@@ -188,13 +191,21 @@ impl Trainer {
             settings.inpaint_beyond,
         );
         let joints = garment_joints(&body, rest, &lbs, settings.joint_share);
-        let poses = poses::pose_set(
+        let mut poses = poses::pose_set(
             &clips,
             joints,
             settings.pose_threshold,
             settings.validation,
             settings.seed,
         );
+        let extra = poses::recombined(
+            &poses.train,
+            &body.skeleton,
+            settings.recombine * poses.train.len(),
+            poses::RECOMBINE_AMPLIFY,
+            settings.seed,
+        );
+        poses.train.extend(extra);
         if poses.train.is_empty() || poses.validation.is_empty() {
             bail!(
                 "only {} balanced poses from {} frames: add clips or lower --pose-threshold",
@@ -449,6 +460,7 @@ impl Trainer {
                 edge_mm: 1e3 * m[5],
                 bend: m[6],
                 collided_pct: 100.0 * m[7],
+                collided_overlap_pct: 0.0,
                 gravity_j: m[8],
             },
             validation: self.validation_due(epoch + 1).then(|| self.validate()),
@@ -598,6 +610,7 @@ fn describe(
             pose_threshold: settings.pose_threshold,
             poses_train: poses.train.len(),
             poses_validation: poses.validation.len(),
+            poses_recombined: poses.train.iter().filter(|p| p.recombined).count(),
             inpaint_beyond: settings.inpaint_beyond,
             inpainted,
         },
