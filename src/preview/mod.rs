@@ -67,6 +67,9 @@ pub struct SheetOptions {
     pub supersample: u32,
     /// Height of the floor line in metres (`None` draws no line).
     pub floor_y: Option<f32>,
+    /// Font pixel size of the labels; a sheet whose longest label does not fit a panel at this
+    /// size draws every label at size 1 (the same size everywhere, never clipped).
+    pub label_scale: u32,
 }
 
 impl Default for SheetOptions {
@@ -79,6 +82,7 @@ impl Default for SheetOptions {
             framing: FramingMode::Shared,
             supersample: 2,
             floor_y: Some(0.0),
+            label_scale: 2,
         }
     }
 }

@@ -5,7 +5,6 @@ use super::framing::{Framing, FramingMode, View};
 use super::raster::{Camera, Target};
 use super::{Panel, SheetOptions};
 
-const LABEL_SCALE: u32 = 2;
 const LABEL_MARGIN: u32 = 6;
 /// Depth jump (metres) that draws an outline; see `Target::outline`.
 const OUTLINE_DEPTH: f32 = 0.03;
@@ -52,9 +51,7 @@ pub fn render_panel_with(panel: &Panel, framing: &Framing, opts: &SheetOptions) 
     target.outline(OUTLINE_DEPTH.max(4.0 / cam.scale()));
     let mut img = target.downsample(ss);
     let ink = text_color(opts.background);
-    // A label too long for the panel at the normal size is drawn at half size, not clipped.
-    let fits = text_width(&panel.label, LABEL_SCALE) + 2 * LABEL_MARGIN <= w;
-    let scale = if fits { LABEL_SCALE } else { 1 };
+    let scale = label_scale(std::slice::from_ref(panel), opts);
     draw_text(
         &mut img,
         &panel.label,
@@ -82,11 +79,26 @@ pub fn contact_sheet(panels: &[Panel], opts: &SheetOptions) -> image::RgbImage {
             FramingMode::Shared => shared_framing(&mut shared, panels, panel.view),
         })
         .collect();
+    let opts = &SheetOptions {
+        label_scale: label_scale(panels, opts),
+        ..opts.clone()
+    };
     for (i, img) in render_all(panels, &framings, opts).iter().enumerate() {
         let (col, row) = (i as u32 % cols, i as u32 / cols);
         image::imageops::replace(&mut sheet, img, (col * w) as i64, (row * h) as i64);
     }
     sheet
+}
+
+/// `opts.label_scale` if every label fits its panel at that size, else 1.
+fn label_scale(panels: &[Panel], opts: &SheetOptions) -> u32 {
+    let fits =
+        |p: &Panel| text_width(&p.label, opts.label_scale) + 2 * LABEL_MARGIN <= opts.panel_width;
+    if panels.iter().all(fits) {
+        opts.label_scale.max(1)
+    } else {
+        1
+    }
 }
 
 /// Render panels on scoped threads (panels are independent), results in input order.

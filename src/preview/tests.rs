@@ -258,9 +258,9 @@ fn shared_framing_shows_motion_per_panel_does_not() {
 #[test]
 fn labels_change_pixels_and_cover_the_charset() {
     let mut p = panel(vec![], View::Front);
-    let blank = render_panel(&p, 200, 100, &square());
+    let blank = render_panel(&p, 300, 100, &square());
     p.label = "Frame 12: t 0.5s (40%)".into();
-    let labelled = render_panel(&p, 200, 100, &square());
+    let labelled = render_panel(&p, 300, 100, &square());
     let changed: Vec<(u32, u32)> = blank
         .enumerate_pixels()
         .zip(labelled.pixels())
@@ -474,4 +474,30 @@ fn timing_twelve_panels() {
         "12 panels 320x480 (ss 2): {:.1} ms",
         t.elapsed().as_secs_f64() * 1000.0 / runs as f64
     );
+}
+
+#[test]
+fn a_label_too_long_for_its_panel_shrinks_every_label_of_the_sheet() {
+    let mut short = panel(vec![], View::Front);
+    short.label = "F0".into();
+    let mut long = panel(vec![], View::Front);
+    long.label = "F1246 10.38S MODEL FRONT".into(); // 24 glyphs: 288 px at size 2
+    let ink_rows = |panels: &[Panel], w: u32| {
+        let sheet = contact_sheet(
+            panels,
+            &SheetOptions {
+                columns: 1,
+                ..plain(w, 60)
+            },
+        );
+        let rows: Vec<u32> = sheet
+            .enumerate_pixels()
+            .filter(|(_, y, p)| *y < 60 && p.0 != BG)
+            .map(|(_, y, _)| y)
+            .collect();
+        rows.iter().max().unwrap() - rows.iter().min().unwrap() + 1
+    };
+    // The short label alone fits at size 2 (14 rows); next to the long one, both are size 1.
+    assert_eq!(ink_rows(std::slice::from_ref(&short), 240), 14);
+    assert_eq!(ink_rows(&[short, long], 240), 7);
 }
