@@ -669,3 +669,30 @@ fn a_head_bowed_into_the_chest_is_flagged_as_body_overlap() {
         bowed.len()
     );
 }
+
+#[test]
+fn recombine_adds_training_poses_and_records_them_in_the_model() {
+    let out = tmp("recombine.safetensors");
+    let r = tiny_train_cli(
+        &out,
+        &["--epochs", "1", "--recombine", "2", "--config", "jersey"],
+    );
+    let text = String::from_utf8_lossy(&r.stdout);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let (train, extra) = text
+        .lines()
+        .find_map(|l| {
+            let rest = l.split(" frames (").nth(1)?;
+            let mut w = rest.split_whitespace();
+            let train: usize = w.next()?.parse().ok()?;
+            let extra: usize = w.nth(2)?.parse().ok()?;
+            Some((train, extra))
+        })
+        .unwrap_or_else(|| panic!("no pose line in {text}"));
+    assert_eq!(extra, 2 * train, "{text}");
+    let info = file::load(&out, Device::Cpu).unwrap().info;
+    assert_eq!(info.training.poses_recombined, extra);
+    assert_eq!(info.training.poses_train, train + extra);
+    assert_eq!(info.fabric.name, "jersey");
+    assert_eq!(info.fabric.collision, 250.0);
+}
