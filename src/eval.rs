@@ -221,6 +221,14 @@ pub fn lbs_frames(
         .collect()
 }
 
+/// Metrics of several garment series over the same clip, and how much the body overlaps itself.
+pub struct Comparison {
+    /// Mean metrics, one per series.
+    pub metrics: Vec<Metrics>,
+    /// Body vertices inside another part of the body (see [`self_overlap`]), per frame.
+    pub body_overlap: Vec<usize>,
+}
+
 /// Mean metrics of several garment series (e.g. model and plain LBS) over the same poses; the
 /// body is posed one frame at a time so long clips need little memory.
 pub fn compare(
@@ -228,19 +236,23 @@ pub fn compare(
     series: &[&[Vec<[f32; 3]>]],
     body: &Body,
     poses: &[Vec<JointTransform>],
-) -> Vec<Metrics> {
-    let per_frame: Vec<Vec<Metrics>> = poses
+) -> Comparison {
+    let per_frame: Vec<(Vec<Metrics>, usize)> = poses
         .par_iter()
         .enumerate()
         .map(|(f, pose)| {
             let posed = PosedBody::new(body, pose);
-            series
+            let m = series
                 .iter()
                 .map(|s| geometry.frame(&s[f], &posed))
-                .collect()
+                .collect();
+            (m, posed.overlap.iter().filter(|&&o| o).count())
         })
         .collect();
-    (0..series.len())
-        .map(|k| Metrics::mean(&per_frame.iter().map(|m| m[k]).collect::<Vec<_>>()))
-        .collect()
+    Comparison {
+        metrics: (0..series.len())
+            .map(|k| Metrics::mean(&per_frame.iter().map(|m| m.0[k]).collect::<Vec<_>>()))
+            .collect(),
+        body_overlap: per_frame.iter().map(|m| m.1).collect(),
+    }
 }

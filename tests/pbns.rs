@@ -270,6 +270,21 @@ fn eval_writes_a_pc2_that_blender_plays() {
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert_eq!(report["frames"], frames);
     assert!(report["metrics"]["model"]["edge_mm"].as_f64().unwrap() > 0.0);
+    // The body-overlap split is part of the collided share, and the clip's overlap is reported.
+    for series in ["model", "lbs"] {
+        let m = &report["metrics"][series];
+        let (all, at) = (
+            m["collided_pct"].as_f64().unwrap(),
+            m["collided_overlap_pct"].as_f64().unwrap(),
+        );
+        assert!((0.0..=all).contains(&at), "{series}: {at} of {all}");
+    }
+    let overlap = &report["body_overlap_vertices"];
+    assert!(overlap["most"].as_u64().unwrap() >= overlap["median"].as_u64().unwrap());
+    assert!(
+        text.contains("inside another part of the skinned body"),
+        "{text}"
+    );
     if Command::new("blender").arg("--version").output().is_err() {
         eprintln!("blender not installed: skipping the independent PC2 read");
         return;

@@ -78,7 +78,8 @@ pub fn run(args: Args) -> Result<i32> {
     let garment = model_frames(&model.model, &body.skeleton, &poses, device);
     let lbs = lbs_frames(&model.lbs, &model.garment.positions, &body.skeleton, &poses);
     let geometry = ClothGeometry::new(&model.garment, model.info.fabric.density);
-    let m = compare(&geometry, &[&garment, &lbs], &body, &poses);
+    let comparison = compare(&geometry, &[&garment, &lbs], &body, &poses);
+    let m = &comparison.metrics;
     write_cache(&args.out, &model.garment, &garment, anim.fps)?;
     if let Some(path) = &args.body_out {
         let frames: Vec<Vec<[f32; 3]>> = poses
@@ -104,6 +105,11 @@ pub fn run(args: Args) -> Result<i32> {
     for (name, x) in [("model", &m[0]), ("plain LBS", &m[1])] {
         println!("{}", row(name, x));
     }
+    let overlap = OverlapSummary::of(&comparison.body_overlap);
+    println!(
+        "body vertices inside another part of the skinned body: median {} per frame, most {} (frame {})",
+        overlap.median, overlap.most, overlap.worst_frame
+    );
     println!("wrote {}", args.out.display());
     if let Some(path) = &args.json {
         let report = json!({
@@ -111,11 +117,38 @@ pub fn run(args: Args) -> Result<i32> {
             "clip": anim.name, "frames": anim.frame_count(), "fps": anim.fps,
             "garment_vertices": model.model.shape.vertices,
             "metrics": { "model": m[0], "lbs": m[1] },
+            "body_overlap_vertices": { "median": overlap.median, "most": overlap.most,
+                "worst_frame": overlap.worst_frame },
             "pc2": args.out.display().to_string(),
         });
         exporters::atomic::write_atomic(path, serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
     Ok(0)
+}
+
+/// How much the skinned body overlaps itself over the clip (vertices inside another part).
+struct OverlapSummary {
+    median: usize,
+    most: usize,
+    worst_frame: usize,
+}
+
+impl OverlapSummary {
+    fn of(per_frame: &[usize]) -> OverlapSummary {
+        let (worst_frame, most) = per_frame
+            .iter()
+            .copied()
+            .enumerate()
+            .max_by_key(|&(f, n)| (n, std::cmp::Reverse(f)))
+            .unwrap_or((0, 0));
+        let mut sorted = per_frame.to_vec();
+        sorted.sort_unstable();
+        OverlapSummary {
+            median: sorted.get(sorted.len() / 2).copied().unwrap_or(0),
+            most,
+            worst_frame,
+        }
+    }
 }
 
 fn row(name: &str, m: &Metrics) -> String {
