@@ -48,10 +48,61 @@ impl Metrics {
     }
 }
 
+/// Edges and their rest lengths: the edge-length metrics of a mesh.
+pub struct Edges {
+    pairs: Vec<[u32; 2]>,
+    rest: Vec<f32>,
+}
+
+impl Edges {
+    pub fn new(rest: &[[f32; 3]], pairs: Vec<[u32; 2]>) -> Edges {
+        Edges {
+            rest: pairs.iter().map(|&e| length(rest, e)).collect(),
+            pairs,
+        }
+    }
+
+    /// Mean |e − e_T| (metres).
+    pub fn mean_error(&self, x: &[[f32; 3]]) -> f64 {
+        let sum: f64 = self
+            .pairs
+            .iter()
+            .zip(&self.rest)
+            .map(|(&e, &r)| (length(x, e) - r).abs() as f64)
+            .sum();
+        sum / self.pairs.len().max(1) as f64
+    }
+
+    /// Mean |e − e_T| / e_T, percent (edges of zero rest length are skipped).
+    pub fn mean_strain_pct(&self, x: &[[f32; 3]]) -> f64 {
+        let (sum, n) = self
+            .pairs
+            .iter()
+            .zip(&self.rest)
+            .filter(|(_, &r)| r > 0.0)
+            .fold((0.0, 0usize), |(s, n), (&e, &r)| {
+                (s + ((length(x, e) - r).abs() / r) as f64, n + 1)
+            });
+        100.0 * sum / n.max(1) as f64
+    }
+}
+
+/// Body edges whose both ends lie within `reach` of the garment at rest: the skin under it.
+pub fn body_edges_under(body: &Body, garment_rest: &[[f32; 3]], reach: f32) -> Edges {
+    let index = PointIndex::new(garment_rest).expect("garment is finite and non-empty");
+    let p = &body.mesh.positions;
+    let near: Vec<bool> = p.par_iter().map(|&v| index.nearest(v).1 < reach).collect();
+    let pairs = Topology::new(&body.mesh)
+        .edges
+        .into_iter()
+        .filter(|e| e.iter().all(|&v| near[v as usize]))
+        .collect();
+    Edges::new(p, pairs)
+}
+
 /// What the metrics need to know about the garment.
 pub struct ClothGeometry {
-    edges: Vec<[u32; 2]>,
-    rest_length: Vec<f32>,
+    pub edges: Edges,
     triangles: Vec<[u32; 3]>,
     hinges: Vec<[u32; 2]>,
     mass: Vec<f32>,
@@ -61,12 +112,7 @@ impl ClothGeometry {
     pub fn new(rest: &TriMesh, density: f32) -> ClothGeometry {
         let topo = Topology::new(rest);
         ClothGeometry {
-            rest_length: topo
-                .edges
-                .iter()
-                .map(|&e| length(&rest.positions, e))
-                .collect(),
-            edges: topo.edges,
+            edges: Edges::new(&rest.positions, topo.edges),
             triangles: rest.triangles.clone(),
             hinges: topo.hinges.iter().map(|h| h.faces).collect(),
             mass: rest.vertex_areas().iter().map(|a| a * density).collect(),
@@ -75,12 +121,6 @@ impl ClothGeometry {
 
     /// Metrics of one posed frame against the posed body.
     pub fn frame(&self, x: &[[f32; 3]], body: &PosedBody) -> Metrics {
-        let edge: f64 = self
-            .edges
-            .iter()
-            .zip(&self.rest_length)
-            .map(|(&e, &r)| (length(x, e) - r).abs() as f64)
-            .sum();
         let n = face_normals(x, &self.triangles);
         let bend: f64 = self
             .hinges
@@ -103,7 +143,7 @@ impl ClothGeometry {
             .map(|(p, m)| (m * GRAVITY * p[1]) as f64)
             .sum();
         Metrics {
-            edge_mm: 1e3 * edge / self.edges.len().max(1) as f64,
+            edge_mm: 1e3 * self.edges.mean_error(x),
             bend: bend / self.hinges.len().max(1) as f64,
             collided_pct: 100.0 * inside as f64 / x.len().max(1) as f64,
             collided_overlap_pct: 100.0 * at_overlap as f64 / x.len().max(1) as f64,
@@ -225,6 +265,11 @@ pub fn lbs_frames(
 pub struct Comparison {
     /// Mean metrics, one per series.
     pub metrics: Vec<Metrics>,
+    /// Mean edge strain |e − e_T| / e_T (%), one per series.
+    pub strain_pct: Vec<f64>,
+    /// Mean edge strain (%) of the skinned body under the garment: a garment that does not
+    /// slide over the body stretches as much.
+    pub body_strain_pct: f64,
     /// Body vertices inside another part of the body (see [`self_overlap`]), per frame.
     pub body_overlap: Vec<usize>,
 }
@@ -235,24 +280,43 @@ pub fn compare(
     geometry: &ClothGeometry,
     series: &[&[Vec<[f32; 3]>]],
     body: &Body,
+    body_under: &Edges,
     poses: &[Vec<JointTransform>],
 ) -> Comparison {
-    let per_frame: Vec<(Vec<Metrics>, usize)> = poses
+    struct Frame {
+        metrics: Vec<Metrics>,
+        strain: Vec<f64>,
+        body_strain: f64,
+        overlap: usize,
+    }
+    let per_frame: Vec<Frame> = poses
         .par_iter()
         .enumerate()
         .map(|(f, pose)| {
             let posed = PosedBody::new(body, pose);
-            let m = series
-                .iter()
-                .map(|s| geometry.frame(&s[f], &posed))
-                .collect();
-            (m, posed.overlap.iter().filter(|&&o| o).count())
+            Frame {
+                metrics: series
+                    .iter()
+                    .map(|s| geometry.frame(&s[f], &posed))
+                    .collect(),
+                strain: series
+                    .iter()
+                    .map(|s| geometry.edges.mean_strain_pct(&s[f]))
+                    .collect(),
+                body_strain: body_under.mean_strain_pct(&posed.points),
+                overlap: posed.overlap.iter().filter(|&&o| o).count(),
+            }
         })
         .collect();
+    let frames = per_frame.len().max(1) as f64;
     Comparison {
         metrics: (0..series.len())
-            .map(|k| Metrics::mean(&per_frame.iter().map(|m| m.0[k]).collect::<Vec<_>>()))
+            .map(|k| Metrics::mean(&per_frame.iter().map(|m| m.metrics[k]).collect::<Vec<_>>()))
             .collect(),
-        body_overlap: per_frame.iter().map(|m| m.1).collect(),
+        strain_pct: (0..series.len())
+            .map(|k| per_frame.iter().map(|m| m.strain[k]).sum::<f64>() / frames)
+            .collect(),
+        body_strain_pct: per_frame.iter().map(|m| m.body_strain).sum::<f64>() / frames,
+        body_overlap: per_frame.iter().map(|m| m.overlap).collect(),
     }
 }

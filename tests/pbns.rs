@@ -279,6 +279,11 @@ fn eval_writes_a_pc2_that_blender_plays() {
         );
         assert!((0.0..=all).contains(&at), "{series}: {at} of {all}");
     }
+    let strain = &report["strain_pct"];
+    for k in ["model", "lbs", "body_under_garment"] {
+        let v = strain[k].as_f64().unwrap();
+        assert!(v > 0.0 && v < 100.0, "{k} strain {v} %");
+    }
     let overlap = &report["body_overlap_vertices"];
     assert!(overlap["most"].as_u64().unwrap() >= overlap["median"].as_u64().unwrap());
     assert!(
@@ -710,4 +715,15 @@ fn recombine_adds_training_poses_and_records_them_in_the_model() {
     assert_eq!(info.training.poses_train, train + extra);
     assert_eq!(info.fabric.name, "jersey");
     assert_eq!(info.fabric.collision, 250.0);
+}
+
+#[test]
+fn edge_error_and_strain_match_hand_values() {
+    use garmentbake::eval::Edges;
+    // Two edges of rest length 1 m and 2 m; the first stretched by 10 cm, the second by 0.
+    let rest = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 2.0, 0.0]];
+    let edges = Edges::new(&rest, vec![[0, 1], [1, 2]]);
+    let posed = [[0.0, 0.0, 0.0], [1.1, 0.0, 0.0], [1.1, 2.0, 0.0]];
+    assert!((edges.mean_error(&posed) - 0.05).abs() < 1e-6);
+    assert!((edges.mean_strain_pct(&posed) - 5.0).abs() < 1e-4);
 }

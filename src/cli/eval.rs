@@ -1,7 +1,7 @@
 //! `garmentbake eval`: a trained model over a clip → PC2 point cache + PBNS metrics.
 
 use super::train::{parse_device, set_threads};
-use crate::eval::{compare, lbs_frames, model_frames, ClothGeometry, Metrics};
+use crate::eval::{body_edges_under, compare, lbs_frames, model_frames, ClothGeometry, Metrics};
 use crate::io::gltf_body::read_body;
 use crate::models::file::{self, check_skeleton};
 use crate::motion::{load_clip, read_maps};
@@ -78,7 +78,8 @@ pub fn run(args: Args) -> Result<i32> {
     let garment = model_frames(&model.model, &body.skeleton, &poses, device);
     let lbs = lbs_frames(&model.lbs, &model.garment.positions, &body.skeleton, &poses);
     let geometry = ClothGeometry::new(&model.garment, model.info.fabric.density);
-    let comparison = compare(&geometry, &[&garment, &lbs], &body, &poses);
+    let under = body_edges_under(&body, &model.garment.positions, UNDER);
+    let comparison = compare(&geometry, &[&garment, &lbs], &body, &under, &poses);
     let m = &comparison.metrics;
     write_cache(&args.out, &model.garment, &garment, anim.fps)?;
     if let Some(path) = &args.body_out {
@@ -105,6 +106,10 @@ pub fn run(args: Args) -> Result<i32> {
     for (name, x) in [("model", &m[0]), ("plain LBS", &m[1])] {
         println!("{}", row(name, x));
     }
+    println!(
+        "edge strain |e − e_T| / e_T: model {:.2} %, plain LBS {:.2} %; the skinned body under the garment {:.2} %",
+        comparison.strain_pct[0], comparison.strain_pct[1], comparison.body_strain_pct
+    );
     let overlap = OverlapSummary::of(&comparison.body_overlap);
     println!(
         "body vertices inside another part of the skinned body: median {} per frame, most {} (frame {})",
@@ -117,6 +122,8 @@ pub fn run(args: Args) -> Result<i32> {
             "clip": anim.name, "frames": anim.frame_count(), "fps": anim.fps,
             "garment_vertices": model.model.shape.vertices,
             "metrics": { "model": m[0], "lbs": m[1] },
+            "strain_pct": { "model": comparison.strain_pct[0], "lbs": comparison.strain_pct[1],
+                "body_under_garment": comparison.body_strain_pct },
             "body_overlap_vertices": { "median": overlap.median, "most": overlap.most,
                 "worst_frame": overlap.worst_frame },
             "pc2": args.out.display().to_string(),
@@ -125,6 +132,9 @@ pub fn run(args: Args) -> Result<i32> {
     }
     Ok(0)
 }
+
+/// Body skin within this distance of the garment at rest counts as under it (metres).
+const UNDER: f32 = 0.02;
 
 /// How much the skinned body overlaps itself over the clip (vertices inside another part).
 struct OverlapSummary {
