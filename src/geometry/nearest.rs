@@ -9,7 +9,7 @@ use std::collections::HashMap;
 use std::num::NonZeroUsize;
 
 use kiddo::immutable::float::kdtree::ImmutableKdTree;
-use kiddo::SquaredEuclidean;
+use kiddo::{NearestNeighbour, SquaredEuclidean};
 use thiserror::Error;
 
 /// Leaf bucket size: kiddo's default; a good trade-off for 3-D body meshes.
@@ -90,15 +90,7 @@ impl PointIndex {
         if hits.len() == k + 1 && hits[k].distance <= hits[k - 1].distance {
             hits = self.tree.within::<SquaredEuclidean>(&p, hits[k].distance);
         }
-        let mut out: Vec<(u32, f32)> = hits
-            .iter()
-            .flat_map(|hit| {
-                let d = hit.distance.sqrt();
-                self.duplicates[hit.item as usize]
-                    .iter()
-                    .map(move |&i| (i, d))
-            })
-            .collect();
+        let mut out = self.expand(&hits);
         out.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
         out.truncate(k);
         out
@@ -117,9 +109,17 @@ impl PointIndex {
 
     /// Every point within `radius` of `p` (duplicates included) with its distance, unordered.
     pub fn within(&self, p: [f32; 3], radius: f32) -> Vec<(u32, f32)> {
-        self.tree
-            .within_unsorted::<SquaredEuclidean>(&p, radius * radius)
-            .iter()
+        self.expand(
+            &self
+                .tree
+                .within_unsorted::<SquaredEuclidean>(&p, radius * radius),
+        )
+    }
+
+    /// Tree hits (squared distances over distinct positions) as every point index sharing the
+    /// position, with its Euclidean distance.
+    fn expand(&self, hits: &[NearestNeighbour<f32, u32>]) -> Vec<(u32, f32)> {
+        hits.iter()
             .flat_map(|hit| {
                 let d = hit.distance.sqrt();
                 self.duplicates[hit.item as usize]
