@@ -10,7 +10,8 @@ ldd $G | grep -E "torch|cuda" | head
 IN="--body samples/body.glb --garment samples/garments/skirt.obj --motion samples/motions/01_01.bvh --motion samples/motions/131_01.bvh"
 for garment in skirt top; do
   IN="--body samples/body.glb --garment samples/garments/$garment.obj --motion samples/motions/01_01.bvh --motion samples/motions/131_01.bvh"
-  echo "== $garment cuda"; timeout 120 $G bench train $IN --device cuda --json
+  echo "== $garment cuda (candidate refresh on the device)"; timeout 120 $G bench train $IN --device cuda --json
+  echo "== $garment cuda, refresh by CPU k-d trees"; timeout 120 $G bench train $IN --device cuda --refresh trees --json
   echo "== $garment cuda batch 64"; timeout 120 $G bench train $IN --device cuda --batch 64 --json
   echo "== $garment cpu 16 threads"; timeout 120 $G bench train $IN --device cpu --threads 16 --json
 done

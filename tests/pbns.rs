@@ -727,3 +727,25 @@ fn edge_error_and_strain_match_hand_values() {
     assert!((edges.mean_error(&posed) - 0.05).abs() < 1e-6);
     assert!((edges.mean_strain_pct(&posed) - 5.0).abs() < 1e-4);
 }
+
+#[test]
+fn device_refresh_resolves_the_same_nearest_body_points_as_the_trees() {
+    use garmentbake::train::predict_tensor;
+    let _g = serial();
+    let mut t = trained(3, 1);
+    let x = predict_tensor(t.model(), t.train_batch());
+    let poses = Tensor::arange(x.size()[0], (Kind::Int64, Device::Cpu));
+    let distance = |t: &Trainer| {
+        let (p, _) = t.correspondences().resolve(&poses, &x);
+        (&x - p)
+            .square()
+            .sum_dim_intlist(-1, false, Kind::Float)
+            .sqrt()
+    };
+    t.refresh();
+    let trees = distance(&t);
+    t.refresh_dense();
+    let dense = distance(&t);
+    let worst = scalar(&(&trees - &dense).abs().max());
+    assert!(worst < 1e-6, "nearest distances differ by {worst} m");
+}

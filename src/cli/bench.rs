@@ -54,9 +54,15 @@ pub fn run(args: Args) -> Result<i32> {
         0 => trainer.steps_per_epoch() * trainer.settings.refresh_every.max(1),
         s => s,
     };
+    // On the device the refresh is synchronous (brute force), once per cycle.
+    let dense = trainer.settings.dense_refresh;
     trainer.times = PhaseTimes::default();
     let t = Instant::now();
-    trainer.start_refresh();
+    if dense {
+        trainer.refresh_dense();
+    } else {
+        trainer.start_refresh();
+    }
     trainer.times.refresh += t.elapsed();
     for s in 0..steps {
         trainer.step(&ids(b.warmup + s), 1e-4)?;
@@ -65,9 +71,13 @@ pub fn run(args: Args) -> Result<i32> {
     trainer.finish_refresh();
     trainer.times.refresh += t.elapsed();
     let timed = trainer.times;
-    // What the worker costs on its own (it overlapped the steps above).
+    // What one refresh costs on its own (the worker's overlapped the steps above).
     let t = Instant::now();
-    trainer.refresh();
+    if dense {
+        trainer.refresh_dense();
+    } else {
+        trainer.refresh();
+    }
     let one_refresh = t.elapsed();
     trainer.times = timed;
     let t = trainer.times;
@@ -77,7 +87,7 @@ pub fn run(args: Args) -> Result<i32> {
             "{}",
             json!({ "garment_vertices": n, "batch": batch, "train_poses": poses, "threads": b.inputs.threads,
                     "poses_per_s": poses_per_s, "vertex_poses_per_s": poses_per_s * n as f64,
-                    "refresh_seconds": one_refresh.as_secs_f64(), "split": split_json(&t) })
+                    "refresh_seconds": one_refresh.as_secs_f64(), "refresh": if dense { "device" } else { "trees" }, "split": split_json(&t) })
         );
     } else {
         println!(
@@ -91,7 +101,8 @@ pub fn run(args: Args) -> Result<i32> {
             1e3 * t.total().as_secs_f64() / steps as f64
         );
         println!(
-            "candidate refresh (worker thread, overlapping the steps): {:.2} s for all {} poses, every {} epochs; body subset {} of {} vertices",
+            "candidate refresh ({}): {:.2} s for all {} poses, every {} epochs; body subset {} of {} vertices",
+            if dense { "brute force on the device, between steps" } else { "k-d trees on a worker thread, overlapping the steps" },
             one_refresh.as_secs_f64(),
             poses,
             trainer.settings.refresh_every,

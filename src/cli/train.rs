@@ -91,6 +91,10 @@ pub struct InputArgs {
     /// Epochs between refreshes of the nearest-body-vertex candidates.
     #[arg(long, default_value_t = 2)]
     pub refresh_every: usize,
+    /// How candidates are refreshed: trees (CPU k-d trees on a worker thread), device (brute
+    /// force with cdist + topk on the training device), auto (device on CUDA, else trees).
+    #[arg(long, default_value = "auto", value_parser = ["auto", "trees", "device"])]
+    pub refresh: String,
     /// Candidate body vertices kept per garment vertex.
     #[arg(long, default_value_t = 6)]
     pub candidates: usize,
@@ -133,6 +137,7 @@ impl InputArgs {
                     .map_or(String::new(), |n| n.to_string_lossy().into_owned()),
             );
         }
+        let device = parse_device(&self.device)?;
         let settings = Settings {
             epochs,
             batch: self.batch,
@@ -144,11 +149,16 @@ impl InputArgs {
             pose_threshold: self.pose_threshold,
             recombine: self.recombine,
             refresh_every: self.refresh_every,
+            dense_refresh: match self.refresh.as_str() {
+                "device" => true,
+                "trees" => false,
+                _ => device.is_cuda(),
+            },
             candidates: self.candidates.max(1),
             weights_lr_scale: self.weights_lr_scale,
             validate_every: self.validate_every,
             inpaint_beyond: (!self.no_inpaint).then_some(self.inpaint_beyond),
-            device: parse_device(&self.device)?,
+            device,
             ..Settings::default()
         };
         Ok((

@@ -53,6 +53,8 @@ pub struct Settings {
     pub candidates: usize,
     /// Epochs between candidate refreshes.
     pub refresh_every: usize,
+    /// Refresh candidates by brute force on the device (GPU) instead of CPU k-d trees.
+    pub dense_refresh: bool,
     /// Body vertices farther than this from the garment at rest are never nearest.
     pub reach: f32,
     pub device: Device,
@@ -83,6 +85,7 @@ impl Default for Settings {
             neighbours: 8,
             candidates: 8,
             refresh_every: 2,
+            dense_refresh: false,
             reach: 0.3,
             device: Device::Cpu,
             weights_lr_scale: 10.0,
@@ -280,6 +283,11 @@ impl Trainer {
         })
     }
 
+    /// The training poses, precomputed for the network.
+    pub fn train_batch(&self) -> &PoseBatch {
+        &self.train
+    }
+
     pub fn correspondences(&self) -> &Correspondences {
         &self.correspondences
     }
@@ -323,6 +331,17 @@ impl Trainer {
     /// run refreshes synchronously. Deterministic: snapshots and installs happen at fixed epochs.
     fn upkeep(&mut self) {
         let t = Instant::now();
+        if self.settings.dense_refresh {
+            if !self.refreshed
+                || self
+                    .epoch()
+                    .is_multiple_of(self.settings.refresh_every.max(1))
+            {
+                self.refresh_dense();
+            }
+            self.times.refresh += t.elapsed();
+            return;
+        }
         let fresh = !self.refreshed;
         if fresh {
             self.refresh();
@@ -342,6 +361,13 @@ impl Trainer {
     pub fn refresh(&mut self) {
         let x = self.predict_train();
         self.correspondences.refresh(&x);
+        self.refreshed = true;
+    }
+
+    /// The same by brute force on the device (see [`Correspondences::refresh_dense`]).
+    pub fn refresh_dense(&mut self) {
+        let x = predict_tensor(self.model(), &self.train);
+        self.correspondences.refresh_dense(&x);
         self.refreshed = true;
     }
 
@@ -618,21 +644,36 @@ fn describe(
     }
 }
 
+/// Poses per forward pass when predicting without gradients.
+const PREDICT_CHUNK: usize = 64;
+
 /// The model's garment for every pose of a precomputed batch, in chunks, without gradients.
 pub fn predict(model: &Pbns, poses: &PoseBatch) -> Vec<Vec<[f32; 3]>> {
-    const CHUNK: usize = 64;
     let n = model.shape.vertices;
-    let mut out = Vec::with_capacity(poses.len());
+    tensor_points(&predict_tensor(model, poses))
+        .chunks_exact(n)
+        .map(<[_]>::to_vec)
+        .collect()
+}
+
+/// [`predict`] as one `[P, N, 3]` tensor on the model's device.
+pub fn predict_tensor(model: &Pbns, poses: &PoseBatch) -> Tensor {
     tch::no_grad(|| {
-        let mut start = 0;
-        while start < poses.len() {
-            let len = CHUNK.min(poses.len() - start);
-            let points = tensor_points(&model.forward(&poses.slice(start, len)).vertices);
-            out.extend(points.chunks_exact(n).map(<[_]>::to_vec));
-            start += len;
+        let n = poses.len();
+        if n == 0 {
+            let shape = [0, model.shape.vertices as i64, 3];
+            return Tensor::zeros(shape, (Kind::Float, poses.features.device()));
         }
-    });
-    out
+        let parts: Vec<Tensor> = (0..n)
+            .step_by(PREDICT_CHUNK)
+            .map(|s| {
+                model
+                    .forward(&poses.slice(s, PREDICT_CHUNK.min(n - s)))
+                    .vertices
+            })
+            .collect();
+        Tensor::cat(&parts, 0)
+    })
 }
 
 /// Adam (Kingma & Ba) written out, so its state can go into checkpoints and resume exactly.

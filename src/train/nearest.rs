@@ -95,6 +95,45 @@ impl Correspondences {
         self.apply(lists);
     }
 
+    /// New candidate lists by brute force on the tensors' device, from the garment in every
+    /// pose `x: [P, N, 3]`: the `c` posed body vertices nearest each garment vertex (`cdist` +
+    /// `topk`, a few poses at a time). On a GPU this takes a few kernels instead of a round trip
+    /// through CPU k-d trees; on the CPU the trees are faster (and run on a worker thread).
+    pub fn refresh_dense(&mut self, x: &Tensor) {
+        let (m, c) = (self.subset as i64, self.per_vertex as i64);
+        let size = x.size();
+        let (poses, n) = (size[0], size[1]);
+        let body = self.points.view([poses, m, 3]);
+        // Poses per chunk so one distance block stays near 2^27 floats (512 MB).
+        let chunk = ((1i64 << 27) / (n * m).max(1)).clamp(1, poses.max(1));
+        let lists: Vec<Tensor> = tch::no_grad(|| {
+            (0..poses)
+                .step_by(chunk as usize)
+                .map(|start| {
+                    let len = chunk.min(poses - start);
+                    let d = Tensor::cdist(
+                        &x.narrow(0, start, len),
+                        &body.narrow(0, start, len),
+                        2.0,
+                        None::<i64>,
+                    );
+                    let (_, nearest) = d.topk(c.min(m), -1, false, true);
+                    let base =
+                        Tensor::arange_start(start, start + len, (Kind::Int64, x.device())) * m;
+                    let nearest = nearest + base.view([len, 1, 1]);
+                    if c > m {
+                        // A tiny subset holds fewer than c points: repeat the nearest.
+                        let first = nearest.narrow(2, 0, 1).expand([len, n, c - m], false);
+                        Tensor::cat(&[nearest, first], 2)
+                    } else {
+                        nearest
+                    }
+                })
+                .collect()
+        });
+        self.candidates = Tensor::cat(&lists, 0).to_device(self.candidates.device());
+    }
+
     /// The same, computed on a worker thread (the k-d tree queries use the rayon pool while
     /// torch keeps training on its own thread); hand the result to [`Correspondences::apply`].
     pub fn spawn_refresh(&self, garment: Vec<Vec<[f32; 3]>>) -> JoinHandle<Vec<i64>> {
