@@ -52,9 +52,8 @@ fn s(rel: &str) -> &'static str {
     Box::leak(sample(rel).to_string_lossy().into_owned().into_boxed_str())
 }
 
-/// The network's garment on 131_02 at 30 fps (the reference), and its garment vertex map.
-fn reference(dir: &Path) -> PathBuf {
-    let pc2 = dir.join("ref.pc2");
+/// `garmentbake eval` of the test model on 131_02 at 30 fps into `out` (PC2 or USD cache).
+fn eval_131_02(out: &Path) {
     garmentbake_ok(&[
         "eval",
         "--model",
@@ -64,8 +63,14 @@ fn reference(dir: &Path) -> PathBuf {
         "--fps",
         "30",
         "--out",
-        pc2.to_str().unwrap(),
+        out.to_str().unwrap(),
     ]);
+}
+
+/// The network's garment on 131_02 at 30 fps (the reference), and its garment vertex map.
+fn reference(dir: &Path) -> PathBuf {
+    let pc2 = dir.join("ref.pc2");
+    eval_131_02(&pc2);
     let file = garmentbake::models::file::load(model(), tch::Device::Cpu).unwrap();
     let skin = file.model.skin();
     let mesh =
@@ -102,21 +107,16 @@ fn threejs_max_error(glb: &Path, dir: &Path, frames: usize) -> f64 {
         .map(|f| format!("{:.9}", f as f64 / 30.0))
         .collect();
     let json = glb.with_extension("three.json");
-    let out = std::process::Command::new("node")
-        .arg(root().join("tools/node/skin_eval.mjs"))
-        .arg(glb)
-        .args(["--times", &times.join(","), "--mesh", "garment", "--pc2"])
-        .arg(dir.join("ref.pc2"))
-        .arg("--pc2-map")
-        .arg(dir.join("map.json"))
-        .arg("--out")
-        .arg(&json)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    run_ok(
+        std::process::Command::new("node")
+            .arg(root().join("tools/node/skin_eval.mjs"))
+            .arg(glb)
+            .args(["--times", &times.join(","), "--mesh", "garment", "--pc2"])
+            .arg(dir.join("ref.pc2"))
+            .arg("--pc2-map")
+            .arg(dir.join("map.json"))
+            .arg("--out")
+            .arg(&json),
     );
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(json).unwrap()).unwrap();
@@ -239,17 +239,7 @@ fn usd_bake_replays_the_network_in_usdskel_and_the_usd_cache_equals_the_pc2() {
     let (_, frames) = exporters::pc2::read(&std::fs::read(&pc2).unwrap()).unwrap();
     // The USD point cache of the same clip reads back equal to the PC2.
     let usd_cache = dir.join("ref.usdc");
-    garmentbake_ok(&[
-        "eval",
-        "--model",
-        model().to_str().unwrap(),
-        "--motion",
-        s("motions/131_02.bvh"),
-        "--fps",
-        "30",
-        "--out",
-        usd_cache.to_str().unwrap(),
-    ]);
+    eval_131_02(&usd_cache);
     write_f32(&dir.join("ref.f32"), &frames, None);
     let (ok, points) = usd_check(&[
         "points",

@@ -16,6 +16,9 @@ use garmentbake::train::{Inputs, Settings, Trainer};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::{Mutex, OnceLock};
+
+mod common;
+use common::run_ok;
 use tch::{Device, Kind, Tensor};
 
 fn sample(p: &str) -> PathBuf {
@@ -237,21 +240,15 @@ fn tiny_model(seed: u64, name: &str) -> PathBuf {
 fn eval_writes_a_pc2_that_blender_plays() {
     let model = tiny_model(2, "eval.safetensors");
     let (pc2, json) = (tmp("clip.pc2"), tmp("metrics.json"));
-    let out = gb()
-        .args(["eval", "--threads", "1", "--fps", "10", "--model"])
-        .arg(&model)
-        .arg("--motion")
-        .arg(sample("motions/131_02.bvh"))
-        .arg("--out")
-        .arg(&pc2)
-        .arg("--json")
-        .arg(&json)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = run_ok(
+        gb().args(["eval", "--threads", "1", "--fps", "10", "--model"])
+            .arg(&model)
+            .arg("--motion")
+            .arg(sample("motions/131_02.bvh"))
+            .arg("--out")
+            .arg(&pc2)
+            .arg("--json")
+            .arg(&json),
     );
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("plain LBS"), "{text}");
@@ -296,20 +293,15 @@ fn eval_writes_a_pc2_that_blender_plays() {
     }
     let result = tmp("blender.json");
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tools/blender/eval_pc2.py");
-    let out = Command::new("blender")
-        .args(["-b", "--factory-startup", "--python"])
-        .arg(&script)
-        .arg("--")
-        .arg(sample("garments/skirt.obj"))
-        .arg(&pc2)
-        .args(["--frames", "0,5", "--out"])
-        .arg(&result)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    run_ok(
+        Command::new("blender")
+            .args(["-b", "--factory-startup", "--python"])
+            .arg(&script)
+            .arg("--")
+            .arg(sample("garments/skirt.obj"))
+            .arg(&pc2)
+            .args(["--frames", "0,5", "--out"])
+            .arg(&result),
     );
     let r: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&result).unwrap()).unwrap();

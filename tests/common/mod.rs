@@ -27,6 +27,19 @@ pub fn garmentbake(args: &[&str]) -> Output {
         .expect("run garmentbake")
 }
 
+/// Runs `cmd` and panics with its stderr unless it succeeds; returns its output.
+pub fn run_ok(cmd: &mut Command) -> Output {
+    let out = cmd
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run {cmd:?}: {e}"));
+    assert!(
+        out.status.success(),
+        "{cmd:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
 /// Runs garmentbake and panics with its stderr unless it succeeds; returns stdout.
 pub fn garmentbake_ok(args: &[&str]) -> String {
     let out = garmentbake(args);
