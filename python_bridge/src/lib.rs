@@ -142,18 +142,73 @@ impl Value<'_> {
     }
 }
 
-/// The USD authoring code (`usd_writer.py`), compiled once per process.
+/// The USD authoring code (`usd_writer.py`) and reading code (`usd_reader.py`), each compiled once
+/// per process.
 static USD_WRITER: PyOnceLock<Py<PyModule>> = PyOnceLock::new();
+static USD_READER: PyOnceLock<Py<PyModule>> = PyOnceLock::new();
 
-fn usd_writer(py: Python<'_>) -> Result<&Bound<'_, PyModule>, BridgeError> {
+fn embedded<'py>(
+    py: Python<'py>,
+    cell: &'static PyOnceLock<Py<PyModule>>,
+    code: &str,
+    file: &std::ffi::CStr,
+    name: &std::ffi::CStr,
+) -> Result<&'py Bound<'py, PyModule>, BridgeError> {
     // pxr first, so a missing usd-core is reported as such rather than as an ImportError inside
-    // the writer module.
+    // the embedded module.
     import_pxr(py, "Usd")?;
-    let module = USD_WRITER.get_or_try_init(py, || -> PyResult<_> {
-        let code = CString::new(include_str!("usd_writer.py")).expect("no NUL in the writer");
-        Ok(PyModule::from_code(py, &code, c"usd_writer.py", c"garmentbake_usd_writer")?.unbind())
+    let module = cell.get_or_try_init(py, || -> PyResult<_> {
+        let code = CString::new(code).expect("no NUL in embedded Python");
+        Ok(PyModule::from_code(py, &code, file, name)?.unbind())
     })?;
     Ok(module.bind(py))
+}
+
+fn usd_writer(py: Python<'_>) -> Result<&Bound<'_, PyModule>, BridgeError> {
+    embedded(
+        py,
+        &USD_WRITER,
+        include_str!("usd_writer.py"),
+        c"usd_writer.py",
+        c"garmentbake_usd_writer",
+    )
+}
+
+/// A mesh prim read from a USD stage: world space, metres, Y-up, counter-clockwise faces.
+#[derive(Clone, Debug, PartialEq)]
+pub struct UsdMesh {
+    /// The prim path, e.g. `/root/shirt`.
+    pub path: String,
+    pub points: Vec<[f32; 3]>,
+    /// Vertices per face (polygons as authored, not triangulated).
+    pub face_counts: Vec<u32>,
+    pub face_indices: Vec<u32>,
+}
+
+/// Every mesh prim of the stage at `path` (any format usd-core opens: .usd, .usda, .usdc, .usdz).
+pub fn read_usd_meshes(path: &Path) -> Result<Vec<UsdMesh>, BridgeError> {
+    Python::attach(|py| {
+        let reader = embedded(
+            py,
+            &USD_READER,
+            include_str!("usd_reader.py"),
+            c"usd_reader.py",
+            c"garmentbake_usd_reader",
+        )?;
+        let meshes = reader.call_method1("read_meshes", (path.to_string_lossy().into_owned(),))?;
+        let mut out = Vec::new();
+        for m in meshes.try_iter()? {
+            let m = m?;
+            let flat: Vec<f32> = m.get_item("points")?.extract()?;
+            out.push(UsdMesh {
+                path: m.get_item("path")?.extract()?,
+                points: flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+                face_counts: m.get_item("face_counts")?.extract()?,
+                face_indices: m.get_item("face_indices")?.extract()?,
+            });
+        }
+        Ok(out)
+    })
 }
 
 /// Calls `usd_writer.<function>(spec, path)`: the writer authors the stage and exports it to `path`
@@ -182,5 +237,74 @@ mod tests {
     fn usd_core_is_reachable_from_the_venv() {
         let v = super::usd_version().expect("usd-core importable");
         assert!(v.starts_with("0.26."), "{v}");
+    }
+
+    /// A Z-up stage in centimetres with a left-handed quad under a translated Xform: pxr itself
+    /// parses the text; the reader must hand back metres, Y-up, world space, counter-clockwise.
+    #[test]
+    fn read_usd_meshes_converts_units_axis_transform_and_winding() {
+        let dir = std::env::temp_dir().join(format!("bridge_read_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("quad.usda");
+        std::fs::write(
+            &path,
+            r#"#usda 1.0
+(
+    upAxis = "Z"
+    metersPerUnit = 0.01
+)
+def Xform "root" (
+)
+{
+    double3 xformOp:translate = (0, 0, 100)
+    uniform token[] xformOpOrder = ["xformOp:translate"]
+    def Mesh "quad"
+    {
+        uniform token orientation = "leftHanded"
+        point3f[] points = [(0, 0, 0), (10, 0, 0), (10, 20, 0), (0, 20, 0)]
+        int[] faceVertexCounts = [4]
+        int[] faceVertexIndices = [0, 1, 2, 3]
+    }
+}
+"#,
+        )
+        .unwrap();
+        let meshes = super::read_usd_meshes(&path).expect("read");
+        assert_eq!(meshes.len(), 1);
+        let m = &meshes[0];
+        assert_eq!(m.path, "/root/quad");
+        assert_eq!(m.face_counts, vec![4]);
+        // Left-handed → the corners after the first are reversed.
+        assert_eq!(m.face_indices, vec![0, 3, 2, 1]);
+        // (x, y, z) cm Z-up, lifted 1 m → (x, z, -y) m Y-up.
+        let expect = [
+            [0.0, 1.0, 0.0],
+            [0.1, 1.0, 0.0],
+            [0.1, 1.0, -0.2],
+            [0.0, 1.0, -0.2],
+        ];
+        for (p, e) in m.points.iter().zip(expect) {
+            for k in 0..3 {
+                assert!((p[k] - e[k]).abs() < 1e-6, "{p:?} vs {e:?}");
+            }
+        }
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// The shipped-data shirt (../shared/data, beside the repo in CI): centimetres → metres.
+    #[test]
+    fn reads_the_newton_shirt() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../shared/data/garments/unisex_shirt.usd");
+        let meshes = super::read_usd_meshes(&path).expect("read");
+        assert_eq!(meshes.len(), 1);
+        assert_eq!(meshes[0].points.len(), 6436);
+        assert_eq!(meshes[0].face_counts.len(), 12736);
+        let top = meshes[0]
+            .points
+            .iter()
+            .map(|p| p[1])
+            .fold(f32::MIN, f32::max);
+        assert!((top - 1.5259).abs() < 1e-3, "{top}");
     }
 }
