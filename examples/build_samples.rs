@@ -169,24 +169,9 @@ const SHIRT_OFFSET: [f32; 3] = [0.0, -0.02, 0.08];
 /// The newton example's short-sleeve shirt (read with usd-core: metres, Y-up), moved onto the body
 /// and fitted outside it. A loose garment, unlike the tights-cut top.
 fn shirt(usd: &Path, body: &Body) -> Result<Garment> {
-    let meshes = python_bridge::read_usd_meshes(usd)
-        .with_context(|| format!("reading {}", usd.display()))?;
-    let [shirt] = meshes.as_slice() else {
-        anyhow::bail!(
-            "{}: expected one mesh, found {}",
-            usd.display(),
-            meshes.len()
-        );
-    };
-    let positions = shirt
-        .points
-        .iter()
-        .map(|p| std::array::from_fn(|k| p[k] + SHIRT_OFFSET[k]))
-        .collect();
-    let mut mesh = TriMesh::new(
-        positions,
-        fan_triangles(&shirt.face_counts, &shirt.face_indices),
-    );
+    let mut mesh = Garment::read(usd)?
+        .mesh
+        .transformed(|p| std::array::from_fn(|k| p[k] + SHIRT_OFFSET[k]));
     let was_inside = push_out(&mut mesh, &body.mesh.positions, &body.normals, FIT_MARGIN)?;
     println!("shirt: {was_inside} vertices were inside the body before fitting");
     Ok(Garment {
@@ -198,18 +183,6 @@ fn shirt(usd: &Path, body: &Body) -> Result<Garment> {
             source: "newton 1.8.0 unisex_shirt.usd (Apache-2.0), moved onto the body, fitted 4 mm outside it".into(),
         },
     })
-}
-
-/// Polygons → triangles, fanned from each face's first corner.
-fn fan_triangles(counts: &[u32], indices: &[u32]) -> Vec<[u32; 3]> {
-    let mut triangles = Vec::new();
-    let mut start = 0;
-    for &n in counts {
-        let face = &indices[start..start + n as usize];
-        triangles.extend((2..face.len()).map(|k| [face[0], face[k - 1], face[k]]));
-        start += n as usize;
-    }
-    triangles
 }
 
 /// The connected piece with the most triangles (cutting can leave crumbs).

@@ -1,11 +1,13 @@
 //! A garment: its rest mesh (aligned with the body's rest pose), the pinned vertices and the
 //! fitting step that pushes vertices out of the body before training or simulation.
 //!
-//! Sidecar next to `NAME.obj`: `NAME.toml` with `pinned = [...]` (vertex indices) and an optional
+//! Read from OBJ or USD (one Mesh prim; usd-core converts units and up axis). Sidecar next to
+//! `NAME.obj` (or `NAME.usd*`): `NAME.toml` with `pinned = [...]` (vertex indices) and an optional
 //! `layer` (0 = innermost, for outfits).
 
 use crate::geometry::{arr3, v3, Laplacian, PointIndex, TriMesh};
 use crate::io::obj::{read_obj, write_obj};
+use crate::io::usd_mesh::{is_usd, read_usd_mesh};
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -35,9 +37,14 @@ pub fn sidecar_path(obj: &Path) -> PathBuf {
 }
 
 impl Garment {
-    /// Reads `NAME.obj` and, when present, `NAME.toml`; pinned indices are checked.
+    /// Reads `NAME.obj` (or a USD file with one Mesh prim) and, when present, `NAME.toml`;
+    /// pinned indices are checked.
     pub fn read(path: &Path) -> Result<Garment> {
-        let obj = read_obj(path)?;
+        let mesh = if is_usd(path) {
+            read_usd_mesh(path)?
+        } else {
+            read_obj(path)?.mesh
+        };
         let side = sidecar_path(path);
         let sidecar = if side.exists() {
             let text = std::fs::read_to_string(&side)
@@ -47,7 +54,7 @@ impl Garment {
         } else {
             GarmentSidecar::default()
         };
-        let n = obj.mesh.vertex_count();
+        let n = mesh.vertex_count();
         if let Some(bad) = sidecar.pinned.iter().find(|&&v| v as usize >= n) {
             bail!(
                 "{}: pinned vertex {bad} out of range ({} has {n} vertices)",
@@ -60,7 +67,7 @@ impl Garment {
             .map_or("garment".into(), |s| s.to_string_lossy().into_owned());
         Ok(Garment {
             name,
-            mesh: obj.mesh,
+            mesh,
             sidecar,
         })
     }

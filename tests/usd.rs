@@ -718,3 +718,82 @@ fn slow_blender_imports_the_usdc_with_armature_shape_keys_and_animation() {
         assert!(err < 1e-3, "body frame {f}: {:.3} mm", err * 1e3);
     }
 }
+
+/// A USD stage, Z-up in centimetres with one Xform lifting it 10 cm: how a DCC might export.
+fn z_up_usda(meshes: &[(&str, &garmentbake::geometry::TriMesh)]) -> String {
+    let mut body = String::new();
+    for (name, mesh) in meshes {
+        let points: Vec<String> = mesh
+            .positions
+            .iter()
+            .map(|p| {
+                format!(
+                    "({}, {}, {})",
+                    p[0] * 100.0,
+                    -p[2] * 100.0,
+                    p[1] * 100.0 - 10.0
+                )
+            })
+            .collect();
+        let indices: Vec<String> = mesh
+            .triangles
+            .iter()
+            .flatten()
+            .map(u32::to_string)
+            .collect();
+        body += &format!(
+            "    def Mesh \"{name}\"\n    {{\n        point3f[] points = [{}]\n        int[] faceVertexCounts = [{}]\n        int[] faceVertexIndices = [{}]\n    }}\n",
+            points.join(", "),
+            vec!["3"; mesh.triangle_count()].join(", "),
+            indices.join(", ")
+        );
+    }
+    format!(
+        "#usda 1.0\n(\n    upAxis = \"Z\"\n    metersPerUnit = 0.01\n)\ndef Xform \"g\"\n{{\n    double3 xformOp:translate = (0, 0, 10)\n    uniform token[] xformOpOrder = [\"xformOp:translate\"]\n{body}}}\n"
+    )
+}
+
+/// A garment given as USD reads back (pxr parses the text) as the same metres / Y-up triangles as
+/// its OBJ; `preview` takes it as a --garment; a stage with two meshes is refused by name.
+#[test]
+fn garment_from_usd_matches_the_obj() {
+    let dir = out_dir("garment_from_usd");
+    let top = Garment::read(&sample("garments/top.obj")).unwrap();
+    let path = dir.join("top_garment.usda");
+    std::fs::write(&path, z_up_usda(&[("top", &top.mesh)])).unwrap();
+    let g = Garment::read(&path).unwrap();
+    assert_eq!(g.name, "top_garment");
+    assert_eq!(g.mesh.triangles, top.mesh.triangles);
+    for (a, b) in g.mesh.positions.iter().zip(&top.mesh.positions) {
+        for k in 0..3 {
+            assert!((a[k] - b[k]).abs() < 2e-6, "{a:?} vs {b:?}");
+        }
+    }
+    let png = dir.join("top_garment.png");
+    let body = sample("body.glb");
+    garmentbake_ok(&[
+        "preview",
+        "--body",
+        body.to_str().unwrap(),
+        "--garment",
+        path.to_str().unwrap(),
+        "--out",
+        png.to_str().unwrap(),
+    ]);
+    assert!(png.exists());
+
+    let two = dir.join("two.usda");
+    std::fs::write(&two, z_up_usda(&[("a", &top.mesh), ("b", &top.mesh)])).unwrap();
+    let out = garmentbake(&[
+        "preview",
+        "--body",
+        body.to_str().unwrap(),
+        "--garment",
+        two.to_str().unwrap(),
+        "--out",
+        png.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("2 Mesh prims (/g/a, /g/b)"), "{err}");
+}

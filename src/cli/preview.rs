@@ -1,8 +1,8 @@
 //! `garmentbake preview`: a PNG contact sheet of the posed body (and garments at rest).
 
 use crate::eval::model_frames;
+use crate::garment::Garment;
 use crate::io::gltf_body::read_body;
-use crate::io::obj::read_obj;
 use crate::models::file::{self, check_skeleton};
 use crate::motion::{load_clip, read_maps};
 use crate::preview::{
@@ -15,7 +15,7 @@ use std::path::PathBuf;
 
 /// Render the body (grey) posed by a clip, front and side, to a PNG contact sheet.
 ///
-/// Without --motion the body is drawn in its rest pose together with any --garment OBJs
+/// Without --motion the body is drawn in its rest pose together with any --garment meshes
 /// (coloured), which shows how garments sit on the body before training. With --model the
 /// trained garment is drawn posed on the body (and, with --lbs, next to plain linear blend
 /// skinning of the same garment, for comparison).
@@ -30,7 +30,7 @@ pub struct Args {
     /// Joint-name map(s) for the clip (TOML).
     #[arg(long = "map")]
     maps: Vec<PathBuf>,
-    /// Garment OBJ(s) drawn at rest (only without --motion).
+    /// Garment mesh(es) drawn at rest, OBJ or USD (only without --motion).
     #[arg(long = "garment")]
     garments: Vec<PathBuf>,
     /// Trained PBNS model (.safetensors): draw its garment posed by the clip.
@@ -115,8 +115,8 @@ pub fn run(args: Args) -> Result<i32> {
     let garments = args
         .garments
         .iter()
-        .map(|p| read_obj(p))
-        .collect::<Result<Vec<_>, _>>()?;
+        .map(|p| Garment::read(p))
+        .collect::<Result<Vec<_>>>()?;
     let poses: Vec<(String, Vec<JointTransform>)> = match &args.motion {
         Some(path) => {
             if !args.garments.is_empty() {

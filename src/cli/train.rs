@@ -48,7 +48,8 @@ pub struct InputArgs {
     /// Skinned body (glTF/glb); metres, Y-up.
     #[arg(long)]
     pub body: PathBuf,
-    /// Garment OBJ in the body's rest pose (sidecar NAME.toml: pinned vertices).
+    /// Garment mesh in the body's rest pose: OBJ, or USD with one Mesh prim (.usd/.usda/.usdc/.usdz,
+    /// converted to metres, Y-up); sidecar NAME.toml: pinned vertices.
     #[arg(long)]
     pub garment: PathBuf,
     /// BVH clip(s) the training poses come from; repeat for several.

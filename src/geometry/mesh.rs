@@ -52,6 +52,10 @@ pub enum MeshError {
     },
     #[error("the mesh has {0} vertices; indices are 32-bit, so at most 4294967295 are allowed")]
     TooManyVertices(usize),
+    #[error("face {face} has {corners} corners; a face needs at least 3")]
+    TooFewCorners { face: usize, corners: u32 },
+    #[error("the faces' corner counts add up to {expected} but there are {found} corner indices")]
+    CornerCountMismatch { expected: usize, found: usize },
 }
 
 impl TriMesh {
@@ -62,6 +66,36 @@ impl TriMesh {
             triangles,
             uv: None,
         }
+    }
+
+    /// A mesh from polygons given as corner counts and flat corner indices (USD's
+    /// faceVertexCounts / faceVertexIndices), fan-triangulated from each face's first corner
+    /// like OBJ faces; validated.
+    pub fn from_polygons(
+        positions: Vec<[f32; 3]>,
+        counts: &[u32],
+        indices: &[u32],
+    ) -> Result<TriMesh, MeshError> {
+        let expected = counts.iter().map(|&n| n as usize).sum();
+        if expected != indices.len() {
+            return Err(MeshError::CornerCountMismatch {
+                expected,
+                found: indices.len(),
+            });
+        }
+        let mut triangles = Vec::with_capacity(expected.saturating_sub(2 * counts.len()));
+        let mut start = 0;
+        for (face, &corners) in counts.iter().enumerate() {
+            if corners < 3 {
+                return Err(MeshError::TooFewCorners { face, corners });
+            }
+            let f = &indices[start..start + corners as usize];
+            triangles.extend((2..f.len()).map(|k| [f[0], f[k - 1], f[k]]));
+            start += corners as usize;
+        }
+        let mesh = TriMesh::new(positions, triangles);
+        mesh.validate()?;
+        Ok(mesh)
     }
 
     pub fn vertex_count(&self) -> usize {
@@ -357,6 +391,38 @@ mod tests {
     use super::*;
     use crate::geometry::test_meshes::{assert_split_roundtrip, grid, seamed_quad};
     use crate::geometry::topology::Topology;
+
+    #[test]
+    fn from_polygons_fans_each_face_and_checks_counts() {
+        let square = vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [0.0, 1.0, 0.0],
+        ];
+        let mut points = square.clone();
+        points.push([2.0, 0.5, 0.0]);
+        let m = TriMesh::from_polygons(points.clone(), &[4, 3], &[0, 1, 2, 3, 1, 4, 2]).unwrap();
+        assert_eq!(m.triangles, vec![[0, 1, 2], [0, 2, 3], [1, 4, 2]]);
+        assert_eq!(
+            TriMesh::from_polygons(points.clone(), &[4, 2], &[0, 1, 2, 3, 1, 4]),
+            Err(MeshError::TooFewCorners {
+                face: 1,
+                corners: 2
+            })
+        );
+        assert_eq!(
+            TriMesh::from_polygons(points.clone(), &[4], &[0, 1, 2]),
+            Err(MeshError::CornerCountMismatch {
+                expected: 4,
+                found: 3
+            })
+        );
+        assert!(matches!(
+            TriMesh::from_polygons(square, &[3], &[0, 1, 7]),
+            Err(MeshError::IndexOutOfRange { index: 7, .. })
+        ));
+    }
 
     #[test]
     fn validate_reports_each_problem() {

@@ -1,7 +1,8 @@
-//! Importers: OBJ garments, BVH motion capture, joint-name maps, skinned glTF bodies, MakeHuman.
+//! Importers: OBJ and USD garments, BVH motion capture, joint-name maps, skinned glTF bodies, MakeHuman.
 
 pub mod bvh;
 pub mod gltf_body;
 pub mod joint_map;
 pub mod makehuman;
 pub mod obj;
+pub mod usd_mesh;
