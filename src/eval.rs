@@ -2,7 +2,7 @@
 //! training validation and `garmentbake eval`). Plain arrays on the CPU, exact nearest
 //! neighbours: this is the reference the exporters are compared with.
 
-use crate::garment::body_offsets;
+use crate::garment::nearest_offsets;
 use crate::geometry::{face_normals, PointIndex, Topology, TriMesh};
 use crate::io::gltf_body::Body;
 use crate::models::pose_features::tensor_points;
@@ -130,12 +130,11 @@ impl ClothGeometry {
                 1.0 - (na[0] * nb[0] + na[1] * nb[1] + na[2] * nb[2]) as f64
             })
             .sum();
-        let offsets = body_offsets(x, &body.points, &body.normals, &body.index);
-        let inside = offsets.iter().filter(|&&d| d < 0.0).count();
-        let at_overlap = x
+        let offsets = nearest_offsets(x, &body.points, &body.normals, &body.index);
+        let inside = offsets.iter().filter(|&&(_, d)| d < 0.0).count();
+        let at_overlap = offsets
             .iter()
-            .zip(&offsets)
-            .filter(|(p, &d)| d < 0.0 && body.overlap[body.index.nearest(**p).0 as usize])
+            .filter(|&&(b, d)| d < 0.0 && body.overlap[b as usize])
             .count();
         let gravity: f64 = x
             .iter()

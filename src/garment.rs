@@ -92,11 +92,25 @@ pub fn body_offsets(
     body_normals: &[[f32; 3]],
     index: &PointIndex,
 ) -> Vec<f32> {
+    nearest_offsets(points, body_points, body_normals, index)
+        .into_iter()
+        .map(|(_, d)| d)
+        .collect()
+}
+
+/// Each point's nearest body vertex and its signed distance along that vertex's normal.
+pub fn nearest_offsets(
+    points: &[[f32; 3]],
+    body_points: &[[f32; 3]],
+    body_normals: &[[f32; 3]],
+    index: &PointIndex,
+) -> Vec<(u32, f32)> {
     points
         .iter()
         .map(|p| {
             let (b, _) = index.nearest(*p);
-            (v3(*p) - v3(body_points[b as usize])).dot(&v3(body_normals[b as usize]))
+            let d = (v3(*p) - v3(body_points[b as usize])).dot(&v3(body_normals[b as usize]));
+            (b, d)
         })
         .collect()
 }
