@@ -771,28 +771,28 @@ fn garment_from_usd_matches_the_obj() {
     }
     let png = dir.join("top_garment.png");
     let body = sample("body.glb");
-    garmentbake_ok(&[
-        "preview",
-        "--body",
-        body.to_str().unwrap(),
-        "--garment",
-        path.to_str().unwrap(),
-        "--out",
-        png.to_str().unwrap(),
-    ]);
+    let preview = |garment: &Path| {
+        garmentbake(&[
+            "preview",
+            "--body",
+            body.to_str().unwrap(),
+            "--garment",
+            garment.to_str().unwrap(),
+            "--out",
+            png.to_str().unwrap(),
+        ])
+    };
+    let out = preview(&path);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert!(png.exists());
 
     let two = dir.join("two.usda");
     std::fs::write(&two, z_up_usda(&[("a", &top.mesh), ("b", &top.mesh)])).unwrap();
-    let out = garmentbake(&[
-        "preview",
-        "--body",
-        body.to_str().unwrap(),
-        "--garment",
-        two.to_str().unwrap(),
-        "--out",
-        png.to_str().unwrap(),
-    ]);
+    let out = preview(&two);
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(err.contains("2 Mesh prims (/g/a, /g/b)"), "{err}");
