@@ -5,9 +5,9 @@
 
 use anyhow::{Context, Result};
 use garmentbake::bake::{skeleton_asset, skinned_mesh_asset, BODY_COLOR};
+use garmentbake::body::Body;
 use garmentbake::garment::{count_inside, push_out, Garment, GarmentSidecar};
 use garmentbake::geometry::{Topology, TriMesh};
-use garmentbake::io::gltf_body::Body;
 use garmentbake::io::makehuman::MakeHuman;
 use nalgebra::Vector3;
 use std::path::{Path, PathBuf};

@@ -5,7 +5,8 @@
 //! `NAME.obj` (or `NAME.usd*`): `NAME.toml` with `pinned = [...]` (vertex indices) and an optional
 //! `layer` (0 = innermost, for outfits).
 
-use crate::geometry::{arr3, v3, Laplacian, PointIndex, TriMesh};
+use crate::body::{body_offsets, Body};
+use crate::geometry::{arr3, v3, Laplacian, PointIndex, Topology, TriMesh};
 use crate::io::obj::{read_obj, write_obj};
 use crate::io::usd_mesh::{is_usd, read_usd_mesh};
 use anyhow::{bail, Context, Result};
@@ -72,6 +73,36 @@ impl Garment {
         })
     }
 
+    /// What would spoil training or simulation, one line each: vertices inside the body at rest
+    /// (more than 5 %), non-manifold edges, degenerate faces. Empty when the garment is fit.
+    pub fn fit_problems(&self, body: &Body) -> Result<Vec<String>> {
+        let mesh = &self.mesh;
+        let n = mesh.vertex_count();
+        let mut problems = Vec::new();
+        let inside = count_inside(&mesh.positions, &body.mesh.positions, &body.normals)?;
+        if inside * 20 > n {
+            problems.push(format!(
+                "{inside} of {n} vertices ({:.1} %) are inside the body at rest (more than 5 %): fit the garment first (push it out of the body)",
+                100.0 * inside as f64 / n as f64
+            ));
+        }
+        let topo = Topology::new(mesh);
+        if let Some(&[a, b]) = topo.non_manifold_edges.first() {
+            problems.push(format!(
+                "{} non-manifold edges (3 or more faces; first: vertices {a}-{b}): they get no bending term",
+                topo.non_manifold_edges.len()
+            ));
+        }
+        let degenerate = mesh.degenerate_faces(1e-12);
+        if let Some(first) = degenerate.first() {
+            problems.push(format!(
+                "{} degenerate (zero-area) faces (first: face {first}): their normals are undefined",
+                degenerate.len()
+            ));
+        }
+        Ok(problems)
+    }
+
     /// Writes the OBJ and its sidecar (both atomically).
     pub fn write(&self, path: &Path) -> Result<()> {
         write_obj(
@@ -83,36 +114,6 @@ impl Garment {
         exporters::atomic::write_atomic(&sidecar_path(path), text.as_bytes())?;
         Ok(())
     }
-}
-
-/// Signed distance of each point along the normal of its nearest body vertex (negative: inside).
-pub fn body_offsets(
-    points: &[[f32; 3]],
-    body_points: &[[f32; 3]],
-    body_normals: &[[f32; 3]],
-    index: &PointIndex,
-) -> Vec<f32> {
-    nearest_offsets(points, body_points, body_normals, index)
-        .into_iter()
-        .map(|(_, d)| d)
-        .collect()
-}
-
-/// Each point's nearest body vertex and its signed distance along that vertex's normal.
-pub fn nearest_offsets(
-    points: &[[f32; 3]],
-    body_points: &[[f32; 3]],
-    body_normals: &[[f32; 3]],
-    index: &PointIndex,
-) -> Vec<(u32, f32)> {
-    points
-        .iter()
-        .map(|p| {
-            let (b, _) = index.nearest(*p);
-            let d = (v3(*p) - v3(body_points[b as usize])).dot(&v3(body_normals[b as usize]));
-            (b, d)
-        })
-        .collect()
 }
 
 /// Vertices of `points` inside the body (offset < 0).

@@ -1,15 +1,33 @@
 //! garmentbake: train neural garment deformers and bake them into standard files.
 //!
-//! Data flows one way: inputs (`io`) → rig / geometry → models → baked asset → exporters → files.
+//! Data flows one way; a module imports only modules on layers below its own
+//! (`scripts/layers.sh` checks it):
+//!
+//! 1. `geometry`, `fabric`, `compute`, `progress`, `preview` — meshes and maths, physical
+//!    parameters, devices, progress bars, the software rasteriser
+//! 2. `rig` — skeleton, forward kinematics, skinning, clips, retargeting (format-neutral)
+//! 3. `body` — the rigged body, posed, and where points lie relative to it
+//! 4. `io` — importers (OBJ, BVH, joint maps, glTF body, MakeHuman, USD meshes)
+//! 5. `motion`, `garment` — clips loaded onto a skeleton; garments and their fitting
+//! 6. `metrics` — garment metrics of posed frames
+//! 7. `models` — the networks and the model file
+//! 8. `train`, `eval` — training; evaluation over clips
+//! 9. `bake` — model output → the exporter-neutral baked asset (`exporters::asset`)
+//! 10. `cli` — one command per pipeline step
 
 pub mod bake;
+pub mod body;
 pub mod cli;
+pub mod compute;
 pub mod eval;
+pub mod fabric;
 pub mod garment;
 pub mod geometry;
 pub mod io;
+pub mod metrics;
 pub mod models;
 pub mod motion;
 pub mod preview;
+pub mod progress;
 pub mod rig;
 pub mod train;

@@ -37,7 +37,7 @@ pub fn load_clip(
         .file_stem()
         .map_or("clip".into(), |s| s.to_string_lossy().into_owned());
     let resolved = joint_map::resolve(&path.display().to_string(), &names, &rig, maps)?;
-    let mut clip = retarget(&bvh, &resolved, skeleton, &name);
+    let mut clip = retarget(&bvh.capture(), &resolved, skeleton, &name);
     if let Some(fps) = fps {
         let step = clip.animation.fps / fps;
         if fps <= 0.0 || (step - step.round()).abs() > 1e-3 || step < 1.0 {

@@ -1,4 +1,5 @@
-//! Never leave a half-written output: write next to the target, then rename over it.
+//! Never leave a half-written output: write next to the target, flush it to disk, then rename
+//! over it. The one way every garmentbake output (models, meshes, pictures, caches) is written.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -17,7 +18,9 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     write_atomic_with(path, |f| f.write_all(bytes))
 }
 
-/// Streams into a temporary file through `fill`, then renames it to `path`.
+/// Streams into a temporary file through `fill`, syncs it (so a crash cannot leave an empty
+/// file under the final name), then renames it to `path`. The error keeps its kind and names
+/// the path: `cannot write PATH: reason`.
 pub fn write_atomic_with(
     path: &Path,
     fill: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> std::io::Result<()>,
@@ -28,17 +31,29 @@ pub fn write_atomic_with(
         let mut w = std::io::BufWriter::new(file);
         fill(&mut w)?;
         w.flush()?;
-        drop(w);
+        let file = w.into_inner().map_err(|e| e.into_error())?;
+        file.sync_all()?;
+        drop(file);
         std::fs::rename(&tmp, path)
     })();
     if let Err(e) = result {
+        // Best effort: the write error is what the caller needs to see.
         let _ = std::fs::remove_file(&tmp);
         return Err(std::io::Error::new(
             e.kind(),
-            format!("cannot write {}: {e}", path.display()),
+            format!("cannot write {}: {}", path.display(), io_message(&e)),
         ));
     }
     Ok(())
+}
+
+/// `io::Error`'s message without the trailing " (os error N)", for one clean line.
+pub fn io_message(e: &std::io::Error) -> String {
+    let text = e.to_string();
+    match text.rfind(" (os error ") {
+        Some(i) if text.ends_with(')') => text[..i].to_string(),
+        _ => text,
+    }
 }
 
 /// Temporary sibling of `path` that keeps its extension (`skirt.usdc` → `.skirt.partial.usdc`),

@@ -18,6 +18,8 @@ use std::path::Path;
 pub enum ExportError {
     #[error(transparent)]
     Gltf(#[from] gltf::GltfError),
+    #[error(transparent)]
+    Pc2(#[from] pc2::Pc2Error),
     #[cfg(feature = "usd")]
     #[error(transparent)]
     Usd(#[from] usd::UsdError),
@@ -25,45 +27,91 @@ pub enum ExportError {
     Unsupported { path: String, what: String },
 }
 
-/// The file formats chosen by output extension.
+/// The kinds of file garmentbake reads or writes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Format {
-    /// `.glb` / `.gltf`
+pub enum FileKind {
     Gltf,
-    /// `.usda` / `.usdc` / `.usdz`
     Usd,
+    Pc2,
+    Bvh,
+    Obj,
+    /// A garmentbake model (`.safetensors`).
+    Model,
 }
 
-impl Format {
-    pub fn from_path(path: &Path) -> Option<Format> {
+/// The one extension table: every extension, its kind, and whether garmentbake writes it
+/// (usd-core reads plain `.usd`, we write the explicit `.usda`/`.usdc`/`.usdz`).
+pub const EXTENSIONS: [(&str, FileKind, bool); 10] = [
+    ("glb", FileKind::Gltf, true),
+    ("gltf", FileKind::Gltf, true),
+    ("usd", FileKind::Usd, false),
+    ("usda", FileKind::Usd, true),
+    ("usdc", FileKind::Usd, true),
+    ("usdz", FileKind::Usd, true),
+    ("pc2", FileKind::Pc2, true),
+    ("bvh", FileKind::Bvh, false),
+    ("obj", FileKind::Obj, true),
+    ("safetensors", FileKind::Model, true),
+];
+
+impl FileKind {
+    /// The kind a path's extension names (any case).
+    pub fn of(path: &Path) -> Option<FileKind> {
+        Self::row(path).map(|(_, k, _)| k)
+    }
+
+    /// The kind of an output path, when garmentbake writes that extension.
+    pub fn written(path: &Path) -> Option<FileKind> {
+        Self::row(path).filter(|r| r.2).map(|(_, k, _)| k)
+    }
+
+    fn row(path: &Path) -> Option<(&'static str, FileKind, bool)> {
         let ext = path.extension()?.to_string_lossy().to_ascii_lowercase();
-        match ext.as_str() {
-            "glb" | "gltf" => Some(Format::Gltf),
-            "usda" | "usdc" | "usdz" => Some(Format::Usd),
-            _ => None,
+        EXTENSIONS.iter().copied().find(|(e, _, _)| *e == ext)
+    }
+
+    /// `.a, .b or .c`: the extensions of `kinds` (written ones only with `written`), for messages.
+    pub fn extension_list(kinds: &[FileKind], written: bool) -> String {
+        let exts: Vec<String> = EXTENSIONS
+            .iter()
+            .filter(|(_, k, w)| kinds.contains(k) && (*w || !written))
+            .map(|(e, _, _)| format!(".{e}"))
+            .collect();
+        match exts.split_last() {
+            Some((last, [])) => last.clone(),
+            Some((last, rest)) => format!("{} or {last}", rest.join(", ")),
+            None => String::new(),
         }
     }
 }
 
 /// Writes a skinned asset in the format its extension names.
 pub fn write(asset: &BakedAsset, path: &Path) -> Result<(), ExportError> {
-    match Format::from_path(path) {
-        Some(Format::Gltf) => Ok(gltf::write(asset, path)?),
-        Some(Format::Usd) => write_usd(asset, path),
-        None => Err(unsupported(
+    match FileKind::written(path) {
+        Some(FileKind::Gltf) => Ok(gltf::write(asset, path)?),
+        Some(FileKind::Usd) => write_usd(asset, path),
+        _ => Err(unsupported(
             path,
-            "unknown extension; use .glb, .gltf, .usda, .usdc or .usdz",
+            &format!(
+                "unknown extension; use {}",
+                FileKind::extension_list(&[FileKind::Gltf, FileKind::Usd], true)
+            ),
         )),
     }
 }
 
-/// Writes a per-frame point cache in the format its extension names.
+/// Writes a per-frame point cache in the format its extension names: PC2, or USD (a Mesh with
+/// time-sampled points).
 pub fn write_point_cache(cache: &PointCache, path: &Path) -> Result<(), ExportError> {
-    match Format::from_path(path) {
-        Some(Format::Usd) => write_usd_cache(cache, path),
+    match FileKind::written(path) {
+        Some(FileKind::Pc2) => Ok(pc2::write(path, cache)?),
+        Some(FileKind::Usd) => write_usd_cache(cache, path),
         _ => Err(unsupported(
             path,
-            "unknown point-cache extension; use .usda, .usdc or .usdz",
+            &format!(
+                "unknown point-cache extension; use {}",
+                FileKind::extension_list(&[FileKind::Pc2, FileKind::Usd], true)
+            ),
         )),
     }
 }

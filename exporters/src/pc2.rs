@@ -4,6 +4,7 @@
 //! Header: `char[12] "POINTCACHE2\0"`, `i32 version = 1`, `i32 points`, `f32 start_frame`,
 //! `f32 sample_rate` (frames between samples), `i32 samples`.
 
+use crate::asset::PointCache;
 use crate::atomic::write_atomic_with;
 use std::io::Write;
 use std::path::Path;
@@ -22,49 +23,29 @@ pub struct Header {
 
 #[derive(Debug, thiserror::Error)]
 pub enum Pc2Error {
-    #[error("frame {frame} has {got} points, the cache has {expected}")]
-    PointCount {
-        frame: usize,
-        got: usize,
-        expected: usize,
-    },
-    #[error("a point cache needs at least one frame and one point")]
-    Empty,
+    #[error("{0}")]
+    Invalid(String),
     #[error("{0}")]
     Io(#[from] std::io::Error),
     #[error("not a PC2 file: {0}")]
     Format(String),
 }
 
-/// Writes `frames` (each the same number of points, world space) atomically, one sample per
-/// frame starting at `start_frame`.
-pub fn write(path: &Path, frames: &[Vec<[f32; 3]>], start_frame: f32) -> Result<(), Pc2Error> {
-    let points = frames.first().map_or(0, Vec::len);
-    if points == 0 {
-        return Err(Pc2Error::Empty);
-    }
-    if let Some((frame, f)) = frames.iter().enumerate().find(|(_, f)| f.len() != points) {
-        return Err(Pc2Error::PointCount {
-            frame,
-            got: f.len(),
-            expected: points,
-        });
-    }
+/// Writes `cache` atomically, one sample per frame starting at frame 0 (PC2 has no rate; the
+/// cache's fps is the scene's).
+pub fn write(path: &Path, cache: &PointCache) -> Result<(), Pc2Error> {
+    cache.check().map_err(Pc2Error::Invalid)?;
     let header = Header {
         version: 1,
-        points,
-        start_frame,
+        points: cache.point_count,
+        start_frame: 0.0,
         sample_rate: 1.0,
-        samples: frames.len(),
+        samples: cache.frame_count(),
     };
     write_atomic_with(path, |w| {
         w.write_all(&header_bytes(&header))?;
-        for f in frames {
-            for p in f {
-                for c in p {
-                    w.write_all(&c.to_le_bytes())?;
-                }
-            }
+        for c in cache.points.iter().flatten() {
+            w.write_all(&c.to_le_bytes())?;
         }
         Ok(())
     })?;
@@ -134,7 +115,15 @@ mod tests {
             vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]],
             vec![[7.0, 8.0, 9.0], [0.5, 0.25, -1.0]],
         ];
-        write(&path, &frames, 0.0).unwrap();
+        let cache = PointCache {
+            name: "a".into(),
+            fps: 30.0,
+            triangles: Vec::new(),
+            uvs: None,
+            point_count: 2,
+            points: frames.iter().flatten().copied().collect(),
+        };
+        write(&path, &cache).unwrap();
         let bytes = std::fs::read(&path).unwrap();
         assert_eq!(bytes.len(), 32 + 2 * 2 * 12);
         assert_eq!(&bytes[..12], b"POINTCACHE2\0");
@@ -144,10 +133,11 @@ mod tests {
             (1, 2, 2, 1.0)
         );
         assert_eq!(back, frames);
-        assert!(matches!(
-            write(&path, &[vec![[0.0; 3]], vec![]], 0.0),
-            Err(Pc2Error::PointCount { frame: 1, .. })
-        ));
+        let partial = PointCache {
+            points: vec![[0.0; 3]; 3],
+            ..cache
+        };
+        assert!(matches!(write(&path, &partial), Err(Pc2Error::Invalid(_))));
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

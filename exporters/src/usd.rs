@@ -55,16 +55,15 @@ pub fn write_point_cache(cache: &PointCache, path: &Path) -> Result<(), UsdError
     author("write_point_cache", &point_cache_spec(cache), path)
 }
 
-/// The extensions usd-core writes; anything else is refused before Python starts.
-pub const EXTENSIONS: [&str; 3] = ["usda", "usdc", "usdz"];
-
+/// usd-core picks the format from the extension: anything but a written USD extension is
+/// refused before Python starts.
 fn check_extension(path: &Path) -> Result<(), String> {
-    let ext = path
-        .extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase());
-    match ext {
-        Some(e) if EXTENSIONS.contains(&e.as_str()) => Ok(()),
-        _ => Err("a USD file must end in .usda, .usdc or .usdz".into()),
+    match crate::FileKind::written(path) {
+        Some(crate::FileKind::Usd) => Ok(()),
+        _ => Err(format!(
+            "a USD file must end in {}",
+            crate::FileKind::extension_list(&[crate::FileKind::Usd], true)
+        )),
     }
 }
 

@@ -9,20 +9,13 @@ use crate::rig::{SkelAnimation, Skeleton, Skin};
 use exporters::asset;
 
 pub fn skeleton_asset(skeleton: &Skeleton) -> asset::Skeleton {
+    let plain = skeleton.to_plain();
     asset::Skeleton {
-        joint_names: skeleton.joint_names.clone(),
-        parents: skeleton.parents.clone(),
-        rest_translations: skeleton.rest.iter().map(|r| r.translation.into()).collect(),
-        rest_rotations: skeleton
-            .rest
-            .iter()
-            .map(|r| r.rotation.coords.into())
-            .collect(),
-        inverse_bind_matrices: skeleton
-            .inverse_bind
-            .iter()
-            .map(|m| m.as_slice().try_into().expect("4x4"))
-            .collect(),
+        joint_names: plain.joint_names,
+        parents: plain.parents,
+        rest_translations: plain.rest_translations,
+        rest_rotations: plain.rest_rotations,
+        inverse_bind_matrices: plain.inverse_bind_matrices,
     }
 }
 

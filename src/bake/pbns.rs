@@ -6,7 +6,8 @@ use super::compress::{offset_matrix, spectrum, spectrum_of, UsedOffsets};
 use super::{animation_asset, skeleton_asset, skinned_mesh_asset, BODY_COLOR};
 use crate::models::file::ModelFile;
 use crate::models::pbns::flat;
-use crate::rig::{SkelAnimation, Skin};
+use crate::models::{predict_chunks, Pbns};
+use crate::rig::{SkelAnimation, Skeleton, Skin};
 use anyhow::{bail, Result};
 use exporters::asset::{BakedAsset, BlendShape};
 use tch::{Device, Kind};
@@ -53,27 +54,29 @@ pub struct ClipError {
 }
 
 /// Network coefficients `X` for every frame of a clip, `[frame][k]`.
-fn clip_coefficients(model: &ModelFile, clip: &SkelAnimation, device: Device) -> Vec<Vec<f32>> {
+fn clip_coefficients(
+    network: &Pbns,
+    skeleton: &Skeleton,
+    clip: &SkelAnimation,
+    device: Device,
+) -> Vec<Vec<f32>> {
     let poses: Vec<_> = (0..clip.frame_count())
         .map(|f| clip.local_pose(f))
         .collect();
-    let k = model.model.shape.width;
-    tch::no_grad(|| {
-        poses
-            .chunks(256)
-            .flat_map(|chunk| {
-                let batch = model.model.batch(model.skeleton(), chunk, device);
-                let x: Vec<f32> = flat(&model.model.coefficients(&batch.features), Kind::Float);
-                x.chunks_exact(k).map(<[f32]>::to_vec).collect::<Vec<_>>()
-            })
-            .collect()
-    })
+    let batch = network.batch(skeleton, &poses, device);
+    let x = predict_chunks(poses.len(), |s, n| {
+        network.coefficients(&batch.slice(s, n).features)
+    });
+    let x: Vec<f32> = flat(&x, Kind::Float);
+    x.chunks_exact(network.shape.width)
+        .map(<[f32]>::to_vec)
+        .collect()
 }
 
 /// The network's PSD basis `D` as K offset sets.
-fn basis(model: &ModelFile) -> Vec<Vec<[f32; 3]>> {
-    let d: Vec<f32> = flat(&model.model.psd, Kind::Float);
-    let n = model.model.shape.vertices;
+fn basis(network: &Pbns) -> Vec<Vec<[f32; 3]>> {
+    let d: Vec<f32> = flat(&network.psd, Kind::Float);
+    let n = network.shape.vertices;
     d.chunks_exact(3 * n)
         .map(|c| c.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect())
         .collect()
@@ -86,17 +89,18 @@ pub fn bake(
     opts: &BakeOptions,
     device: Device,
 ) -> Result<(BakedAsset, BakeReport)> {
-    let basis = basis(model);
+    let network = model.pbns()?;
+    let basis = basis(network);
     let per_clip: Vec<Vec<Vec<f32>>> = clips
         .iter()
-        .map(|c| clip_coefficients(model, c, device))
+        .map(|c| clip_coefficients(network, model.skeleton(), c, device))
         .collect();
     let all: Vec<Vec<f32>> = per_clip.iter().flatten().cloned().collect();
     let used = UsedOffsets {
         basis: &basis,
         coefficients: &all,
     };
-    let network_skin = model.model.skin();
+    let network_skin = network.skin();
     let skin = file_skin(&network_skin, opts.influences)?;
     let mut reference = offset_matrix(&basis, &all);
     let pruned = skin.influences < network_skin.influences;
@@ -298,7 +302,7 @@ impl<'a> Replay<'a> {
 
 /// World-space distance between the baked replay and the network, every frame of a clip.
 fn replay_error(
-    skeleton: &crate::rig::Skeleton,
+    skeleton: &Skeleton,
     rest: &[[f32; 3]],
     clip: &SkelAnimation,
     network: &Replay,

@@ -1,11 +1,13 @@
 //! `garmentbake bake`: a trained PBNS model + clips → glTF / USD with blend shapes, skin and
 //! one animation (joints + blend-shape weights) per clip.
 
-use super::train::{parse_device, set_threads};
-use crate::bake::pbns::{bake, BakeOptions, Targets};
-use crate::models::file;
+use super::args::{ClipArgs, ComputeArgs, OutputArgs};
+use super::Execute;
+use crate::bake::pbns::{bake, BakeOptions, BakeReport, Targets};
+
 use crate::motion::{load_clip, read_maps};
 use anyhow::{bail, Context, Result};
+use serde::Serialize;
 use std::path::PathBuf;
 
 /// Bake a trained PBNS model into a file any engine plays without a neural runtime.
@@ -19,80 +21,90 @@ use std::path::PathBuf;
 pub struct Args {
     /// Trained model (.safetensors from `garmentbake train`).
     #[arg(long)]
-    model: PathBuf,
+    pub model: PathBuf,
     #[command(flatten)]
-    clips: super::ClipArgs,
+    pub clips: ClipArgs,
     /// Output: .glb / .gltf (glTF 2.0) or .usda / .usdc / .usdz (UsdSkel).
     #[arg(long)]
-    out: PathBuf,
+    pub out: PathBuf,
     /// Number of blend shapes to keep (8 is what every glTF client must support).
     #[arg(long, conflicts_with = "tolerance_mm")]
-    max_targets: Option<usize>,
+    pub max_targets: Option<usize>,
     /// Keep the fewest blend shapes whose max offset error over the clips is within this (mm).
     #[arg(long)]
-    tolerance_mm: Option<f32>,
+    pub tolerance_mm: Option<f32>,
     /// Joint influences per vertex in the file (default: the model's own, which loses nothing).
     #[arg(long)]
-    influences: Option<usize>,
+    pub influences: Option<usize>,
     /// Add the body mesh on the same skeleton.
     #[arg(long)]
-    with_body: bool,
-    /// Print a JSON report instead of text.
-    #[arg(long)]
-    json: bool,
-    /// cpu, cuda or cuda:N.
-    #[arg(long, default_value = "cpu")]
-    device: String,
+    pub with_body: bool,
+    #[command(flatten)]
+    pub compute: ComputeArgs,
+    #[command(flatten)]
+    pub output: OutputArgs,
 }
 
-pub fn run(args: Args) -> Result<i32> {
-    set_threads(2, 2);
-    let device = parse_device(&args.device)?;
-    let model = file::load(&args.model, device)?;
-    let maps = read_maps(&args.clips.maps)?;
-    let clips = args
-        .clips
-        .motions
-        .iter()
-        .map(|p| load_clip(p, &maps, model.skeleton(), args.clips.fps).map(|c| c.animation))
-        .collect::<Result<Vec<_>>>()?;
-    let targets = match (args.max_targets, args.tolerance_mm) {
-        (Some(0), _) => bail!("--max-targets must be at least 1"),
-        (Some(k), _) => Targets::Count(k),
-        (None, Some(t)) if t > 0.0 => Targets::Tolerance(t * 1e-3),
-        (None, Some(t)) => bail!("--tolerance-mm must be positive, got {t}"),
-        (None, None) => Targets::Full,
-    };
-    let opts = BakeOptions {
-        targets,
-        influences: args.influences,
-        with_body: args.with_body,
-    };
-    let (asset, report) = bake(&model, &clips, &opts, device)?;
-    exporters::write(&asset, &args.out)
-        .with_context(|| format!("writing {}", args.out.display()))?;
-    let size = std::fs::metadata(&args.out).map(|m| m.len()).unwrap_or(0);
-    if args.json {
-        let v = serde_json::json!({ "out": args.out.display().to_string(), "bytes": size, "report": report });
-        println!("{v}");
-        return Ok(0);
+/// What was written and what the bake cost.
+#[derive(Serialize)]
+pub struct Report {
+    pub out: PathBuf,
+    pub bytes: u64,
+    pub report: BakeReport,
+}
+
+impl Execute for Args {
+    type Report = Report;
+
+    fn execute(&self, _say: &dyn Fn(&str)) -> Result<Report> {
+        let (model, device) = self.compute.load_model(&self.model)?;
+        let maps = read_maps(&self.clips.maps)?;
+        let clips = self
+            .clips
+            .motions
+            .iter()
+            .map(|p| load_clip(p, &maps, model.skeleton(), self.clips.fps).map(|c| c.animation))
+            .collect::<Result<Vec<_>>>()?;
+        let targets = match (self.max_targets, self.tolerance_mm) {
+            (Some(0), _) => bail!("--max-targets must be at least 1"),
+            (Some(k), _) => Targets::Count(k),
+            (None, Some(t)) if t > 0.0 => Targets::Tolerance(t * 1e-3),
+            (None, Some(t)) => bail!("--tolerance-mm must be positive, got {t}"),
+            (None, None) => Targets::Full,
+        };
+        let opts = BakeOptions {
+            targets,
+            influences: self.influences,
+            with_body: self.with_body,
+        };
+        let (asset, report) = bake(&model, &clips, &opts, device)?;
+        exporters::write(&asset, &self.out)
+            .with_context(|| format!("writing {}", self.out.display()))?;
+        Ok(Report {
+            out: self.out.clone(),
+            bytes: std::fs::metadata(&self.out).map(|m| m.len()).unwrap_or(0),
+            report,
+        })
     }
-    println!(
-        "{} blend shapes (offsets used by the clips have rank {}), {} influences per vertex",
-        report.targets, report.used_rank, report.influences
-    );
-    for c in &report.clips {
-        if let Some(p) = c.pruning_error_m {
-            println!("{}: pruning the skin to {} influences alone would cost {:.3} mm; corrective blend shapes compensate", c.clip, report.influences, p * 1e3);
-        }
+
+    fn print(r: &Report) {
+        let b = &r.report;
         println!(
-            "{}: {} frames, replay error vs network: max {:.3} mm, mean {:.4} mm",
-            c.clip,
-            c.frames,
-            c.max_error_m * 1e3,
-            c.mean_error_m * 1e3
+            "{} blend shapes (offsets used by the clips have rank {}), {} influences per vertex",
+            b.targets, b.used_rank, b.influences
         );
+        for c in &b.clips {
+            if let Some(p) = c.pruning_error_m {
+                println!("{}: pruning the skin to {} influences alone would cost {:.3} mm; corrective blend shapes compensate", c.clip, b.influences, p * 1e3);
+            }
+            println!(
+                "{}: {} frames, replay error vs network: max {:.3} mm, mean {:.4} mm",
+                c.clip,
+                c.frames,
+                c.max_error_m * 1e3,
+                c.mean_error_m * 1e3
+            );
+        }
+        println!("wrote {} ({:.1} MB)", r.out.display(), r.bytes as f64 / 1e6);
     }
-    println!("wrote {} ({:.1} MB)", args.out.display(), size as f64 / 1e6);
-    Ok(0)
 }

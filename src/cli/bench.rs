@@ -1,10 +1,11 @@
 //! `garmentbake bench train`: throughput of the training step and where its time goes.
 
-use super::train::{split_json, split_line, InputArgs};
-use crate::train::{PhaseTimes, Trainer};
+use super::args::OutputArgs;
+use super::train::InputArgs;
+use super::Execute;
+use crate::train::pbns::{RefreshMode, StepBench, Trainer};
 use anyhow::Result;
-use serde_json::json;
-use std::time::Instant;
+use serde::Serialize;
 
 /// Measure training speed: poses/s, garment-vertex-poses/s and the split between forward,
 /// losses, nearest neighbour (candidate lookup + amortised k-d tree refreshes) and backward.
@@ -30,86 +31,62 @@ struct TrainBench {
     /// Untimed steps first (allocator and cache warm-up).
     #[arg(long, default_value_t = 5)]
     warmup: usize,
-    /// Print JSON instead of text.
-    #[arg(long)]
-    json: bool,
+    #[command(flatten)]
+    output: OutputArgs,
 }
 
-pub fn run(args: Args) -> Result<i32> {
-    let What::Train(b) = args.what;
-    let (inputs, settings) = b.inputs.load(1, false, b.json)?;
-    let mut trainer = Trainer::new(inputs, settings)?;
-    let n = trainer.model().shape.vertices;
-    let poses = trainer.poses.train.len() as i64;
-    let batch = trainer.settings.batch as i64;
-    let ids =
-        |s: usize| -> Vec<i64> { (0..batch).map(|i| (s as i64 * batch + i) % poses).collect() };
-    trainer.refresh();
-    for s in 0..b.warmup {
-        trainer.step(&ids(s), 1e-4)?;
+/// The measurement and the thread count it ran with.
+#[derive(Serialize)]
+pub struct Report {
+    #[serde(flatten)]
+    pub bench: StepBench,
+    pub threads: usize,
+}
+
+impl Args {
+    pub fn json(&self) -> bool {
+        let What::Train(b) = &self.what;
+        b.output.json
     }
-    // One refresh cycle as training runs it: snapshot + worker thread during the steps of
-    // `refresh_every` epochs, then install (waiting for the worker if it is not done).
-    let steps = match b.steps {
-        0 => trainer.steps_per_epoch() * trainer.settings.refresh_every.max(1),
-        s => s,
-    };
-    // On the device the refresh is synchronous (brute force), once per cycle.
-    let dense = trainer.settings.dense_refresh;
-    trainer.times = PhaseTimes::default();
-    let t = Instant::now();
-    if dense {
-        trainer.refresh_dense();
-    } else {
-        trainer.start_refresh();
+}
+
+impl Execute for Args {
+    type Report = Report;
+
+    fn execute(&self, _say: &dyn Fn(&str)) -> Result<Report> {
+        let What::Train(b) = &self.what;
+        let (inputs, settings, _) = b.inputs.load(1, false)?;
+        let mut trainer = Trainer::new(inputs, settings)?;
+        Ok(Report {
+            bench: trainer.bench(b.steps, b.warmup)?,
+            threads: b.inputs.compute.threads,
+        })
     }
-    trainer.times.refresh += t.elapsed();
-    for s in 0..steps {
-        trainer.step(&ids(b.warmup + s), 1e-4)?;
-    }
-    let t = Instant::now();
-    trainer.finish_refresh();
-    trainer.times.refresh += t.elapsed();
-    let timed = trainer.times;
-    // What one refresh costs on its own (the worker's overlapped the steps above).
-    let t = Instant::now();
-    if dense {
-        trainer.refresh_dense();
-    } else {
-        trainer.refresh();
-    }
-    let one_refresh = t.elapsed();
-    trainer.times = timed;
-    let t = trainer.times;
-    let poses_per_s = t.poses as f64 / t.total().as_secs_f64();
-    if b.json {
-        println!(
-            "{}",
-            json!({ "garment_vertices": n, "batch": batch, "train_poses": poses, "threads": b.inputs.threads,
-                    "poses_per_s": poses_per_s, "vertex_poses_per_s": poses_per_s * n as f64,
-                    "refresh_seconds": one_refresh.as_secs_f64(), "refresh": if dense { "device" } else { "trees" }, "split": split_json(&t) })
-        );
-    } else {
+
+    fn print(r: &Report) {
+        let b = &r.bench;
         println!(
             "{} steps of {} poses, {} garment vertices, {} training poses, {} threads",
-            steps, batch, n, poses, b.inputs.threads
+            b.steps, b.batch, b.garment_vertices, b.train_poses, r.threads
         );
         println!(
             "{:.0} poses/s, {:.0}k garment-vertex-poses/s ({:.1} ms per step)",
-            poses_per_s,
-            poses_per_s * n as f64 / 1e3,
-            1e3 * t.total().as_secs_f64() / steps as f64
+            b.poses_per_s,
+            b.vertex_poses_per_s / 1e3,
+            1e3 * b.split.seconds / b.steps.max(1) as f64
         );
         println!(
             "candidate refresh ({}): {:.2} s for all {} poses, every {} epochs; body subset {} of {} vertices",
-            if dense { "brute force on the device, between steps" } else { "k-d trees on a worker thread, overlapping the steps" },
-            one_refresh.as_secs_f64(),
-            poses,
-            trainer.settings.refresh_every,
-            trainer.correspondences().subset_len(),
-            trainer.file.body.mesh.vertex_count()
+            match b.refresh {
+                RefreshMode::Device => "brute force on the device, between steps",
+                _ => "k-d trees on a worker thread, overlapping the steps",
+            },
+            b.refresh_seconds,
+            b.train_poses,
+            b.refresh_every,
+            b.body_subset,
+            b.body_vertices
         );
-        println!("{}", split_line(&t));
+        println!("{}", b.split);
     }
-    Ok(0)
 }

@@ -1,18 +1,20 @@
-//! `garmentbake eval`: a trained model over a clip → PC2 point cache + PBNS metrics.
+//! `garmentbake eval`: a trained model over a clip → point cache + PBNS metrics.
 
-use super::train::{parse_device, set_threads};
-use crate::eval::{body_edges_under, compare, lbs_frames, model_frames, ClothGeometry, Metrics};
+use super::args::{ClipArgs, ComputeArgs, OutputArgs};
+use super::Execute;
+use crate::eval::{compare, lbs_frames, model_frames};
 use crate::io::gltf_body::read_body;
-use crate::models::file::{self, check_skeleton};
+use crate::metrics::{body_edges_under, ClothGeometry, Metrics};
+use crate::models::file::check_skeleton;
 use crate::motion::{load_clip, read_maps};
 use anyhow::{Context, Result};
-use serde_json::json;
-use std::path::PathBuf;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
 
 /// Evaluate a trained model on a motion clip: write the garment's world-space vertices for every
-/// frame as a PC2 point cache (Blender: Mesh Cache modifier on the garment OBJ, which has the
-/// same vertex order) and print the PBNS metrics next to plain linear blend skinning with the
-/// proximity weights (the same garment without the network).
+/// frame as a point cache (PC2: Blender's Mesh Cache modifier on the garment OBJ, which has the
+/// same vertex order; USD: a Mesh with time-sampled points) and print the PBNS metrics next to
+/// plain linear blend skinning with the proximity weights (the same garment without the network).
 ///
 /// Metrics: edge error (mean |e − e_T|, mm), bending (mean 1 − cos between neighbouring face
 /// normals), collided vertices (% with d·n < 0 against the nearest body vertex; "of which body
@@ -22,125 +24,162 @@ use std::path::PathBuf;
 pub struct Args {
     /// Trained model (.safetensors from `garmentbake train`).
     #[arg(long)]
-    model: PathBuf,
-    /// BVH clip, retargeted onto the model's skeleton.
-    #[arg(long)]
-    motion: PathBuf,
-    /// Joint-name map(s) for the clip (TOML).
-    #[arg(long = "map")]
-    maps: Vec<PathBuf>,
+    pub model: PathBuf,
+    /// The clip (one --motion), retargeted onto the model's skeleton.
+    #[command(flatten)]
+    pub clips: ClipArgs,
     /// Body to collide with (default: the one stored in the model); must have the same skeleton.
     #[arg(long)]
-    body: Option<PathBuf>,
-    /// Keep every n-th frame so the clip plays at this rate (must divide the source rate).
-    #[arg(long)]
-    fps: Option<f32>,
+    pub body: Option<PathBuf>,
     /// Output point cache of the garment, one sample per frame: .pc2 (start frame 0), or
     /// .usda/.usdc/.usdz (a Mesh with time-sampled points and extent).
     #[arg(long)]
-    out: PathBuf,
-    /// Also write the posed body as a PC2.
+    pub out: PathBuf,
+    /// Also write the posed body as a point cache (same formats).
     #[arg(long)]
-    body_out: Option<PathBuf>,
-    /// Write the metrics as JSON to this file.
-    #[arg(long)]
-    json: Option<PathBuf>,
-    /// cpu, cuda or cuda:N.
-    #[arg(long, default_value = "cpu")]
-    device: String,
-    /// CPU threads.
-    #[arg(long, default_value_t = 2)]
-    threads: usize,
+    pub body_out: Option<PathBuf>,
+    #[command(flatten)]
+    pub compute: ComputeArgs,
+    #[command(flatten)]
+    pub output: OutputArgs,
 }
 
-pub fn run(args: Args) -> Result<i32> {
-    set_threads(args.threads, args.threads);
-    let device = parse_device(&args.device)?;
-    let model = file::load(&args.model, device)?;
-    let body = match &args.body {
-        Some(path) => {
-            let b = read_body(path)?;
-            check_skeleton(model.skeleton(), &b.skeleton, &path.display().to_string())?;
-            b
-        }
-        None => model.body.clone(),
-    };
-    let clip = load_clip(
-        &args.motion,
-        &read_maps(&args.maps)?,
-        &body.skeleton,
-        args.fps,
-    )?;
-    let anim = &clip.animation;
-    let poses: Vec<_> = (0..anim.frame_count())
-        .map(|f| anim.local_pose(f))
-        .collect();
-    let garment = model_frames(&model.model, &body.skeleton, &poses, device);
-    let lbs = lbs_frames(&model.lbs, &model.garment.positions, &body.skeleton, &poses);
-    let geometry = ClothGeometry::new(&model.garment, model.info.fabric.density);
-    let under = body_edges_under(&body, &model.garment.positions, UNDER);
-    let comparison = compare(&geometry, &[&garment, &lbs], &body, &under, &poses);
-    let m = &comparison.metrics;
-    write_cache(&args.out, &model.garment, &garment, anim.fps)?;
-    if let Some(path) = &args.body_out {
-        let frames: Vec<Vec<[f32; 3]>> = poses
-            .iter()
-            .map(|p| {
-                body.skin
-                    .skin_points(&body.mesh.positions, &body.skeleton.skinning_matrices(p))
-            })
+/// Metrics of the model and of plain LBS over one clip.
+#[derive(Serialize)]
+pub struct Report {
+    pub model: Option<String>,
+    pub clip: String,
+    pub motion: PathBuf,
+    pub frames: usize,
+    pub fps: f32,
+    pub garment_vertices: usize,
+    pub metrics: SeriesMetrics,
+    pub strain_pct: Strain,
+    pub body_overlap_vertices: OverlapSummary,
+    pub pc2: PathBuf,
+    pub body_out: Option<PathBuf>,
+}
+
+#[derive(Serialize)]
+pub struct SeriesMetrics {
+    pub model: Metrics,
+    pub lbs: Metrics,
+}
+
+/// Mean edge strain |e − e_T| / e_T (%).
+#[derive(Serialize)]
+pub struct Strain {
+    pub model: f64,
+    pub lbs: f64,
+    /// The skinned body under the garment: a garment that does not slide over it stretches as much.
+    pub body_under_garment: f64,
+}
+
+impl Execute for Args {
+    type Report = Report;
+
+    fn execute(&self, _say: &dyn Fn(&str)) -> Result<Report> {
+        let (model, device) = self.compute.load_model(&self.model)?;
+        let network = model.pbns()?;
+        let body = match &self.body {
+            Some(path) => {
+                let b = read_body(path)?;
+                check_skeleton(model.skeleton(), &b.skeleton, &path.display().to_string())?;
+                b
+            }
+            None => model.body.clone(),
+        };
+        let motion = self.clips.single()?;
+        let clip = load_clip(
+            motion,
+            &read_maps(&self.clips.maps)?,
+            &body.skeleton,
+            self.clips.fps,
+        )?;
+        let anim = &clip.animation;
+        let poses: Vec<_> = (0..anim.frame_count())
+            .map(|f| anim.local_pose(f))
             .collect();
-        write_cache(path, &body.mesh, &frames, anim.fps)?;
+        let garment = model_frames(network, &body.skeleton, &poses, device);
+        let lbs = lbs_frames(&model.lbs, &model.garment.positions, &body.skeleton, &poses);
+        let geometry = ClothGeometry::new(&model.garment, model.info.fabric.density);
+        let under = body_edges_under(&body, &model.garment.positions, UNDER);
+        let comparison = compare(&geometry, &[&garment, &lbs], &body, &under, &poses);
+        write_cache(&self.out, &model.garment, &garment, anim.fps)?;
+        if let Some(path) = &self.body_out {
+            let frames: Vec<Vec<[f32; 3]>> = poses
+                .iter()
+                .map(|p| {
+                    body.skin
+                        .skin_points(&body.mesh.positions, &body.skeleton.skinning_matrices(p))
+                })
+                .collect();
+            write_cache(path, &body.mesh, &frames, anim.fps)?;
+        }
+        let m = &comparison.metrics;
+        Ok(Report {
+            model: self
+                .model
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned()),
+            clip: anim.name.clone(),
+            motion: motion.to_path_buf(),
+            frames: anim.frame_count(),
+            fps: anim.fps,
+            garment_vertices: network.shape.vertices,
+            metrics: SeriesMetrics {
+                model: m[0],
+                lbs: m[1],
+            },
+            strain_pct: Strain {
+                model: comparison.strain_pct[0],
+                lbs: comparison.strain_pct[1],
+                body_under_garment: comparison.body_strain_pct,
+            },
+            body_overlap_vertices: OverlapSummary::of(&comparison.body_overlap),
+            pc2: self.out.clone(),
+            body_out: self.body_out.clone(),
+        })
     }
-    println!(
-        "{}: {} frames at {} fps, {} garment vertices",
-        args.motion.display(),
-        anim.frame_count(),
-        anim.fps,
-        model.model.shape.vertices
-    );
-    println!(
-        "{:<12} {:>10} {:>10} {:>13} {:>22} {:>12}",
-        "", "edge (mm)", "bend", "collided (%)", "of which body overlap", "gravity (J)"
-    );
-    for (name, x) in [("model", &m[0]), ("plain LBS", &m[1])] {
-        println!("{}", row(name, x));
+
+    fn print(r: &Report) {
+        println!(
+            "{}: {} frames at {} fps, {} garment vertices",
+            r.motion.display(),
+            r.frames,
+            r.fps,
+            r.garment_vertices
+        );
+        println!(
+            "{:<12} {:>10} {:>10} {:>13} {:>22} {:>12}",
+            "", "edge (mm)", "bend", "collided (%)", "of which body overlap", "gravity (J)"
+        );
+        for (name, x) in [("model", &r.metrics.model), ("plain LBS", &r.metrics.lbs)] {
+            println!("{}", row(name, x));
+        }
+        let s = &r.strain_pct;
+        println!(
+            "edge strain |e − e_T| / e_T: model {:.2} %, plain LBS {:.2} %; the skinned body under the garment {:.2} %",
+            s.model, s.lbs, s.body_under_garment
+        );
+        let o = &r.body_overlap_vertices;
+        println!(
+            "body vertices inside another part of the skinned body: median {} per frame, most {} (frame {})",
+            o.median, o.most, o.worst_frame
+        );
+        println!("wrote {}", r.pc2.display());
     }
-    println!(
-        "edge strain |e − e_T| / e_T: model {:.2} %, plain LBS {:.2} %; the skinned body under the garment {:.2} %",
-        comparison.strain_pct[0], comparison.strain_pct[1], comparison.body_strain_pct
-    );
-    let overlap = OverlapSummary::of(&comparison.body_overlap);
-    println!(
-        "body vertices inside another part of the skinned body: median {} per frame, most {} (frame {})",
-        overlap.median, overlap.most, overlap.worst_frame
-    );
-    println!("wrote {}", args.out.display());
-    if let Some(path) = &args.json {
-        let report = json!({
-            "model": args.model.file_name().map(|n| n.to_string_lossy().into_owned()),
-            "clip": anim.name, "frames": anim.frame_count(), "fps": anim.fps,
-            "garment_vertices": model.model.shape.vertices,
-            "metrics": { "model": m[0], "lbs": m[1] },
-            "strain_pct": { "model": comparison.strain_pct[0], "lbs": comparison.strain_pct[1],
-                "body_under_garment": comparison.body_strain_pct },
-            "body_overlap_vertices": { "median": overlap.median, "most": overlap.most,
-                "worst_frame": overlap.worst_frame },
-            "pc2": args.out.display().to_string(),
-        });
-        exporters::atomic::write_atomic(path, serde_json::to_string_pretty(&report)?.as_bytes())?;
-    }
-    Ok(0)
 }
 
 /// Body skin within this distance of the garment at rest counts as under it (metres).
 const UNDER: f32 = 0.02;
 
 /// How much the skinned body overlaps itself over the clip (vertices inside another part).
-struct OverlapSummary {
-    median: usize,
-    most: usize,
-    worst_frame: usize,
+#[derive(Serialize)]
+pub struct OverlapSummary {
+    pub median: usize,
+    pub most: usize,
+    pub worst_frame: usize,
 }
 
 impl OverlapSummary {
@@ -168,18 +207,13 @@ fn row(name: &str, m: &Metrics) -> String {
     )
 }
 
-/// A per-frame point cache: PC2 by default, USD (time-sampled `points`) for .usda/.usdc/.usdz.
+/// A per-frame point cache of `mesh`'s vertices, in the format the extension names.
 fn write_cache(
-    path: &std::path::Path,
+    path: &Path,
     mesh: &crate::geometry::TriMesh,
     frames: &[Vec<[f32; 3]>],
     fps: f32,
 ) -> Result<()> {
-    let usd = exporters::Format::from_path(path) == Some(exporters::Format::Usd);
-    if !usd {
-        return exporters::pc2::write(path, frames, 0.0)
-            .with_context(|| format!("writing {}", path.display()));
-    }
     let cache = exporters::PointCache {
         name: path
             .file_stem()

@@ -1,9 +1,11 @@
 //! `garmentbake inspect`: what a file holds, as text or JSON.
 
+use super::Execute;
 use crate::geometry::topology::Topology;
 use crate::io::bvh::Bvh;
 use crate::io::obj::read_obj;
 use anyhow::{bail, Context, Result};
+use exporters::FileKind;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 
@@ -14,34 +16,41 @@ use std::path::{Path, PathBuf};
 #[derive(clap::Args)]
 pub struct Args {
     /// File to describe (.glb, .gltf, .bvh, .obj, .safetensors).
-    file: PathBuf,
+    pub file: PathBuf,
     /// Print JSON instead of text.
     #[arg(long)]
-    json: bool,
+    pub json: bool,
 }
 
-pub fn run(args: Args) -> Result<i32> {
-    let ext = args
-        .file
-        .extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase())
-        .unwrap_or_default();
-    let report = match ext.as_str() {
-        "glb" | "gltf" => gltf_report(&args.file)?,
-        "bvh" => bvh_report(&args.file)?,
-        "obj" => obj_report(&args.file)?,
-        "safetensors" => model_report(&args.file, args.json)?,
-        _ => bail!(
-            "{}: unknown file type (expected .glb, .gltf, .bvh, .obj or .safetensors)",
-            args.file.display()
-        ),
-    };
-    if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
-    } else {
-        print_text(&report, 0);
+impl Execute for Args {
+    type Report = Value;
+
+    fn execute(&self, _say: &dyn Fn(&str)) -> Result<Value> {
+        let path = &self.file;
+        match FileKind::of(path) {
+            Some(FileKind::Gltf) => gltf_report(path),
+            Some(FileKind::Bvh) => bvh_report(path),
+            Some(FileKind::Obj) => obj_report(path),
+            Some(FileKind::Model) => model_report(path, self.json),
+            _ => bail!(
+                "{}: unknown file type (expected {})",
+                path.display(),
+                FileKind::extension_list(
+                    &[
+                        FileKind::Gltf,
+                        FileKind::Bvh,
+                        FileKind::Obj,
+                        FileKind::Model
+                    ],
+                    false
+                )
+            ),
+        }
     }
-    Ok(0)
+
+    fn print(report: &Value) {
+        print_text(report, 0);
+    }
 }
 
 fn gltf_report(path: &Path) -> Result<Value> {
@@ -108,22 +117,24 @@ fn model_report(path: &Path, full: bool) -> Result<Value> {
     }
     let names = &info.skeleton.joint_names;
     let g = &info.garment;
-    let last = info.history.last();
+    let p = info.pbns()?;
+    let last = p.history.last();
     Ok(json!({
         "file": path.display().to_string(),
         "format": format!("{} v{}", info.format, info.version),
         "model": {
-            "mlp": format!("{} inputs → {} × {} ReLU → {} PSD blend shapes", info.shape.features, info.shape.layers, info.shape.width, info.shape.width),
-            "influences": info.shape.influences,
-            "feature_joints": info.skeleton.feature_joints.iter().map(|&j| names[j].clone()).collect::<Vec<_>>(),
+            "kind": info.model.kind(),
+            "mlp": format!("{} inputs → {} × {} ReLU → {} PSD blend shapes", p.shape.features, p.shape.layers, p.shape.width, p.shape.width),
+            "influences": p.shape.influences,
+            "feature_joints": p.feature_joints.iter().map(|&j| names[j].clone()).collect::<Vec<_>>(),
         },
         "skeleton": { "joints": names.len(), "names": names },
         "garment": { "name": g.name, "vertices": g.vertices, "faces": g.faces.len(), "uvs": g.uv.is_some(),
                      "pinned": g.pinned.len(), "rest_hash": g.rest_hash },
         "body": { "name": info.body.name, "vertices": info.body.vertices, "rest_hash": info.body.rest_hash },
         "fabric": info.fabric,
-        "training": info.training,
-        "history": { "epochs": info.history.len(), "last": last },
+        "training": p.training,
+        "history": { "epochs": p.history.len(), "last": last },
         "tensors": tensors,
     }))
 }

@@ -1,28 +1,45 @@
 //! The `garmentbake` command line: one subcommand per pipeline step.
 
-mod bake;
-mod bench;
-mod eval;
-mod inspect;
-mod pose;
-mod preview;
-mod train;
+pub mod args;
+pub mod bake;
+pub mod bench;
+pub mod eval;
+pub mod inspect;
+pub mod pose;
+pub mod preview;
+pub mod train;
 
+use anyhow::Result;
 use clap::{Parser, Subcommand};
-use std::path::PathBuf;
+use serde::Serialize;
 
-/// The motion-capture clips a command reads, and how (shared by `pose` and `bake`).
-#[derive(clap::Args)]
-struct ClipArgs {
-    /// BVH clip(s); repeat --motion for several, one animation each.
-    #[arg(long = "motion", required = true)]
-    motions: Vec<PathBuf>,
-    /// Joint-name map(s) (TOML); each applies to the clips whose joints it covers.
-    #[arg(long = "map")]
-    maps: Vec<PathBuf>,
-    /// Keep every n-th frame so clips play at this rate (must divide the source rate).
-    #[arg(long)]
-    fps: Option<f32>,
+/// A command as a library call: `execute` does the work and returns a report (serde), `print`
+/// shows it to a person; `--json` prints the report instead. A batch runner calls `execute`.
+pub trait Execute {
+    type Report: Serialize;
+    /// Runs the command; `say` gets progress notes for a person (a no-op with `--json`).
+    fn execute(&self, say: &dyn Fn(&str)) -> Result<Self::Report>;
+    fn print(report: &Self::Report);
+    /// The exit code a successful run reports (1 for checks that failed).
+    fn exit_code(_report: &Self::Report) -> i32 {
+        0
+    }
+}
+
+/// Executes `command`, then prints its report as text, or as JSON with `json` (`--json`).
+fn run<C: Execute>(command: &C, json: bool) -> Result<i32> {
+    let say = |line: &str| {
+        if !json {
+            println!("{line}");
+        }
+    };
+    let report = command.execute(&say)?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        C::print(&report);
+    }
+    Ok(C::exit_code(&report))
 }
 
 #[derive(Parser)]
@@ -55,13 +72,13 @@ enum Command {
 pub fn main() -> i32 {
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Inspect(a) => inspect::run(a),
-        Command::Pose(a) => pose::run(a),
-        Command::Preview(a) => preview::run(a),
-        Command::Train(a) => train::run(a),
-        Command::Eval(a) => eval::run(a),
-        Command::Bake(a) => bake::run(a),
-        Command::Bench(a) => bench::run(a),
+        Command::Inspect(a) => run(&a, a.json),
+        Command::Pose(a) => run(&a, a.output.json),
+        Command::Preview(a) => run(&a, a.output.json),
+        Command::Train(a) => run(&a, a.output.json),
+        Command::Eval(a) => run(&a, a.output.json),
+        Command::Bake(a) => run(&a, a.output.json),
+        Command::Bench(a) => run(&a, a.json()),
     };
     match result {
         Ok(code) => code,
@@ -86,20 +103,4 @@ fn one_line(e: &anyhow::Error) -> String {
         out.push_str(&text);
     }
     out.replace('\n', " ")
-}
-
-/// A progress bar on stderr for work longer than a second; hidden when stderr is not a terminal
-/// or in `--json` mode so machine output stays clean.
-pub(crate) fn progress(len: u64, what: &str, quiet: bool) -> indicatif::ProgressBar {
-    if quiet {
-        return indicatif::ProgressBar::hidden();
-    }
-    let bar = indicatif::ProgressBar::new(len);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template("{msg:>12} [{bar:30}] {pos}/{len} ({eta})")
-            .expect("valid template")
-            .progress_chars("=> "),
-    );
-    bar.set_message(what.to_string());
-    bar
 }

@@ -1,9 +1,12 @@
 //! `garmentbake pose`: the body with a retargeted joint animation per clip, as glTF or USD.
 
+use super::args::{ClipArgs, OutputArgs};
+use super::Execute;
 use crate::bake::{animation_asset, skeleton_asset, skinned_mesh_asset, BODY_COLOR};
 use crate::io::gltf_body::read_body;
 use crate::motion::{load_clip, read_maps};
 use anyhow::{Context, Result};
+use serde::Serialize;
 use std::path::PathBuf;
 
 /// Pose the body with motion-capture clips and write an animated, skinned glTF or USD.
@@ -16,69 +19,95 @@ use std::path::PathBuf;
 pub struct Args {
     /// Skinned body (glTF/glb): the mesh, its skin and skeleton.
     #[arg(long)]
-    body: PathBuf,
+    pub body: PathBuf,
     #[command(flatten)]
-    clips: super::ClipArgs,
+    pub clips: ClipArgs,
     /// Output .glb (binary) or .gltf (+ .bin); .usda, .usdc or .usdz (UsdSkel, through usd-core).
     #[arg(long)]
-    out: PathBuf,
-    /// Print a JSON report instead of text.
-    #[arg(long)]
-    json: bool,
+    pub out: PathBuf,
+    #[command(flatten)]
+    pub output: OutputArgs,
 }
 
-pub fn run(args: Args) -> Result<i32> {
-    let body = read_body(&args.body)?;
-    let maps = read_maps(&args.clips.maps)?;
-    let mut asset = exporters::BakedAsset {
-        skeleton: skeleton_asset(&body.skeleton),
-        meshes: vec![skinned_mesh_asset(
-            &body.name,
-            &body.mesh,
-            Some(&body.normals),
-            &body.skin,
-            BODY_COLOR,
-        )],
-        ..Default::default()
-    };
-    asset
-        .provenance
-        .push(("body".into(), args.body.display().to_string()));
-    let mut report = Vec::new();
-    let bar = super::progress(
-        args.clips.motions.len() as u64,
-        "retarget",
-        args.json || args.clips.motions.len() < 2,
-    );
-    for path in &args.clips.motions {
-        bar.inc(1);
-        let clip = load_clip(path, &maps, &body.skeleton, args.clips.fps)?;
-        let a = &clip.animation;
-        if !args.json {
-            println!(
-                "{}: {} frames at {} fps ({:.2} s), map {}, {:.4} m per unit, floor offset {:+.3} m",
-                path.display(), a.frame_count(), a.fps, a.duration(), clip.map_name, clip.scale, clip.floor_offset
-            );
-        }
-        report.push(serde_json::json!({
-            "clip": path.display().to_string(), "frames": a.frame_count(), "fps": a.fps,
-            "map": clip.map_name, "scale": clip.scale, "floor_offset_m": clip.floor_offset,
-        }));
-        asset.animations.push(animation_asset(a));
+/// The file written and how each clip was retargeted.
+#[derive(Serialize)]
+pub struct Report {
+    pub out: PathBuf,
+    pub clips: Vec<ClipReport>,
+}
+
+#[derive(Serialize)]
+pub struct ClipReport {
+    pub clip: PathBuf,
+    pub frames: usize,
+    pub fps: f32,
+    pub duration_s: f32,
+    pub map: String,
+    /// Metres per clip unit.
+    pub scale: f32,
+    pub floor_offset_m: f32,
+}
+
+impl Execute for Args {
+    type Report = Report;
+
+    fn execute(&self, say: &dyn Fn(&str)) -> Result<Report> {
+        let body = read_body(&self.body)?;
+        let maps = read_maps(&self.clips.maps)?;
+        let mut asset = exporters::BakedAsset {
+            skeleton: skeleton_asset(&body.skeleton),
+            meshes: vec![skinned_mesh_asset(
+                &body.name,
+                &body.mesh,
+                Some(&body.normals),
+                &body.skin,
+                BODY_COLOR,
+            )],
+            ..Default::default()
+        };
         asset
             .provenance
-            .push((format!("clip:{}", a.name), path.display().to_string()));
-    }
-    bar.finish_and_clear();
-    exporters::write(&asset, &args.out)
-        .with_context(|| format!("writing {}", args.out.display()))?;
-    if args.json {
-        println!(
-            "{}",
-            serde_json::json!({ "out": args.out.display().to_string(), "clips": report })
+            .push(("body".into(), self.body.display().to_string()));
+        let mut clips = Vec::new();
+        let motions = &self.clips.motions;
+        let bar = crate::progress::bar(
+            motions.len() as u64,
+            "retarget",
+            self.output.json || motions.len() < 2,
         );
-    } else {
-        println!("wrote {}", args.out.display());
+        for path in motions {
+            bar.inc(1);
+            let clip = load_clip(path, &maps, &body.skeleton, self.clips.fps)?;
+            let a = &clip.animation;
+            let r = ClipReport {
+                clip: path.clone(),
+                frames: a.frame_count(),
+                fps: a.fps,
+                duration_s: a.duration(),
+                map: clip.map_name.clone(),
+                scale: clip.scale,
+                floor_offset_m: clip.floor_offset,
+            };
+            say(&format!(
+                "{}: {} frames at {} fps ({:.2} s), map {}, {:.4} m per unit, floor offset {:+.3} m",
+                path.display(), r.frames, r.fps, r.duration_s, r.map, r.scale, r.floor_offset_m
+            ));
+            clips.push(r);
+            asset.animations.push(animation_asset(a));
+            asset
+                .provenance
+                .push((format!("clip:{}", a.name), path.display().to_string()));
+        }
+        bar.finish_and_clear();
+        exporters::write(&asset, &self.out)
+            .with_context(|| format!("writing {}", self.out.display()))?;
+        Ok(Report {
+            out: self.out.clone(),
+            clips,
+        })
     }
-    Ok(0)
+
+    fn print(r: &Report) {
+        println!("wrote {}", r.out.display());
+    }
 }

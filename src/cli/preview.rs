@@ -1,5 +1,7 @@
 //! `garmentbake preview`: a PNG contact sheet of the posed body (and garments at rest).
 
+use super::args::OutputArgs;
+use super::Execute;
 use crate::eval::model_frames;
 use crate::garment::Garment;
 use crate::io::gltf_body::read_body;
@@ -11,6 +13,7 @@ use crate::preview::{
 };
 use crate::rig::{JointTransform, SkelAnimation};
 use anyhow::{bail, Result};
+use serde::Serialize;
 use std::path::PathBuf;
 
 /// Render the body (grey) posed by a clip, front and side, to a PNG contact sheet.
@@ -23,43 +26,52 @@ use std::path::PathBuf;
 pub struct Args {
     /// Skinned body (glTF/glb).
     #[arg(long)]
-    body: PathBuf,
+    pub body: PathBuf,
     /// BVH clip to pose the body with (rest pose when omitted).
     #[arg(long)]
-    motion: Option<PathBuf>,
+    pub motion: Option<PathBuf>,
     /// Joint-name map(s) for the clip (TOML).
     #[arg(long = "map")]
-    maps: Vec<PathBuf>,
+    pub maps: Vec<PathBuf>,
     /// Garment mesh(es) drawn at rest, OBJ or USD (only without --motion).
     #[arg(long = "garment")]
-    garments: Vec<PathBuf>,
+    pub garments: Vec<PathBuf>,
     /// Trained PBNS model (.safetensors): draw its garment posed by the clip.
     #[arg(long)]
-    model: Option<PathBuf>,
+    pub model: Option<PathBuf>,
     /// With --model: add a panel of plain LBS (proximity weights, no PSD) next to each one.
     #[arg(long)]
-    lbs: bool,
+    pub lbs: bool,
     /// Number of frames, evenly spaced over the clip.
     #[arg(long, default_value_t = 6)]
-    frames: usize,
+    pub frames: usize,
     /// Explicit frame numbers instead of --frames, e.g. 0,120,240.
     #[arg(long, value_delimiter = ',')]
-    frame_list: Vec<usize>,
+    pub frame_list: Vec<usize>,
     /// Views per frame: front, side, back, three-quarter.
     #[arg(long, value_delimiter = ',', default_values_t = [ViewArg::Front, ViewArg::Side])]
-    views: Vec<ViewArg>,
+    pub views: Vec<ViewArg>,
     /// Panel size in pixels.
     #[arg(long, default_value_t = 240)]
-    width: u32,
+    pub width: u32,
     #[arg(long, default_value_t = 360)]
-    height: u32,
+    pub height: u32,
     /// Output PNG.
     #[arg(long)]
-    out: PathBuf,
+    pub out: PathBuf,
+    #[command(flatten)]
+    pub output: OutputArgs,
+}
+
+/// The picture written.
+#[derive(Serialize)]
+pub struct Report {
+    pub out: PathBuf,
+    pub panels: usize,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
-enum ViewArg {
+pub enum ViewArg {
     Front,
     Side,
     Back,
@@ -95,7 +107,19 @@ struct Shot {
     garments: Vec<(Vec<[f32; 3]>, usize)>,
 }
 
-pub fn run(args: Args) -> Result<i32> {
+impl Execute for Args {
+    type Report = Report;
+
+    fn execute(&self, _say: &dyn Fn(&str)) -> Result<Report> {
+        render(self)
+    }
+
+    fn print(r: &Report) {
+        println!("wrote {} ({} panels)", r.out.display(), r.panels);
+    }
+}
+
+fn render(args: &Args) -> Result<Report> {
     let body = read_body(&args.body)?;
     let model = match &args.model {
         Some(path) => {
@@ -162,7 +186,7 @@ pub fn run(args: Args) -> Result<i32> {
         };
         let g = garments.len();
         let x = model_frames(
-            &m.model,
+            m.pbns()?,
             &body.skeleton,
             std::slice::from_ref(pose),
             tch::Device::Cpu,
@@ -218,8 +242,10 @@ pub fn run(args: Args) -> Result<i32> {
         ..Default::default()
     };
     save_png(&contact_sheet(&panels, &opts), &args.out)?;
-    println!("wrote {} ({} panels)", args.out.display(), panels.len());
-    Ok(0)
+    Ok(Report {
+        out: args.out.clone(),
+        panels: panels.len(),
+    })
 }
 
 fn frame_label(anim: &SkelAnimation, frame: usize) -> String {

@@ -4,7 +4,7 @@ use std::collections::HashMap;
 
 use thiserror::Error;
 
-use crate::geometry::topology::unique_edges;
+use crate::geometry::edges::{sorted_pair, unique_edges};
 use crate::geometry::{arr3, v3};
 
 /// Face-varying UVs (as in OBJ / USD faceVarying): one UV triangle per mesh triangle.
@@ -374,16 +374,6 @@ fn subdivide_indexed<T: Copy>(
         out_tris.extend([[a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca]]);
     }
     (out_items, out_tris)
-}
-
-/// An undirected edge key.
-#[inline]
-pub(crate) fn sorted_pair(a: u32, b: u32) -> [u32; 2] {
-    if a < b {
-        [a, b]
-    } else {
-        [b, a]
-    }
 }
 
 #[cfg(test)]

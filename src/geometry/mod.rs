@@ -5,6 +5,7 @@
 //! Functions that take a mesh assume it passed [`TriMesh::validate`] (the readers guarantee that):
 //! bad *input* is rejected at the file boundary with an error, not deep inside the maths.
 
+pub mod edges;
 pub mod laplacian;
 pub mod mesh;
 pub mod nearest;

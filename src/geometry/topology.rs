@@ -1,6 +1,7 @@
 //! Edge connectivity: unique edges, hinges (for bending), boundaries and non-manifold edges.
 
-use crate::geometry::mesh::{sorted_pair, TriMesh};
+use crate::geometry::edges::sorted_pair;
+use crate::geometry::mesh::TriMesh;
 
 /// Two triangles sharing an interior edge; the unit of the bending energy.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -152,17 +153,6 @@ fn sorted_edge_uses(triangles: &[[u32; 3]]) -> Vec<EdgeUse> {
     }
     uses.sort_unstable_by_key(|e| (e.key, e.face));
     uses
-}
-
-/// Unique undirected edges (sorted pairs, sorted) of any triangle list, e.g. UV triangles.
-pub fn unique_edges(triangles: &[[u32; 3]]) -> Vec<[u32; 2]> {
-    let mut edges: Vec<[u32; 2]> = triangles
-        .iter()
-        .flat_map(|&[a, b, c]| [sorted_pair(a, b), sorted_pair(b, c), sorted_pair(c, a)])
-        .collect();
-    edges.sort_unstable();
-    edges.dedup();
-    edges
 }
 
 #[cfg(test)]

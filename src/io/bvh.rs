@@ -11,6 +11,7 @@
 
 use std::path::Path;
 
+use crate::rig::retarget::CaptureClip;
 use nalgebra::{UnitQuaternion, Vector3};
 use thiserror::Error;
 
@@ -271,6 +272,17 @@ impl Bvh {
             out.push(world);
         }
         out
+    }
+
+    /// The clip in the format-neutral form retargeting takes.
+    pub fn capture(&self) -> CaptureClip {
+        CaptureClip {
+            rest_positions: self.world_rest_positions(),
+            frames: (0..self.frame_count())
+                .map(|f| self.world_pose(f))
+                .collect(),
+            frame_time: self.frame_time,
+        }
     }
 }
 

@@ -1,21 +1,12 @@
 //! Reads a skinned body from glTF: the first skinned mesh node, its skin's joints as a Skeleton,
 //! JOINTS/WEIGHTS as a Skin. All triangle primitives of that mesh are merged.
 
+use crate::body::Body;
 use crate::geometry::mesh::{FaceVaryingUv, TriMesh};
 use crate::rig::skeleton::topological_order;
 use crate::rig::{JointTransform, Skeleton, Skin};
 use nalgebra::{Matrix4, Quaternion, UnitQuaternion, Vector3};
 use std::path::Path;
-
-/// A rigged body: welded-or-not triangle mesh, per-vertex normals and a skin on a skeleton.
-#[derive(Clone, Debug)]
-pub struct Body {
-    pub name: String,
-    pub mesh: TriMesh,
-    pub normals: Vec<[f32; 3]>,
-    pub skeleton: Skeleton,
-    pub skin: Skin,
-}
 
 #[derive(Debug, thiserror::Error)]
 #[error("{path}: {reason}")]

@@ -30,14 +30,7 @@ pub struct JointMap {
     pub source: String,
 }
 
-/// The outcome of [`resolve`] for one clip.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Resolved {
-    /// The map's `name`, or `"identity"`.
-    pub map_name: String,
-    /// Per clip joint (clip order): the rig joint index it drives.
-    pub clip_to_rig: Vec<Option<usize>>,
-}
+use crate::rig::retarget::JointMapping;
 
 /// Why a joint map could not be read or applied. Every message is one line naming the file or clip.
 #[derive(Debug, Error)]
@@ -188,7 +181,7 @@ impl JointMap {
         clip: &str,
         clip_joint_names: &[&str],
         rig_joint_names: &[&str],
-    ) -> Result<Resolved, JointMapError> {
+    ) -> Result<JointMapping, JointMapError> {
         let targets = self.pairs.iter().map(|(c, r)| (c.as_str(), r.as_str()));
         let lookup: HashMap<&str, &str> = targets.collect();
         let rig = rig_index(rig_joint_names);
@@ -206,7 +199,7 @@ impl JointMap {
             clip_to_rig.push(Some(i));
         }
         check_unique(clip, clip_joint_names, &clip_to_rig)?;
-        Ok(Resolved {
+        Ok(JointMapping {
             map_name: self.name.clone(),
             clip_to_rig,
         })
@@ -221,7 +214,7 @@ pub fn resolve(
     clip_joint_names: &[&str],
     rig_joint_names: &[&str],
     user_maps: &[JointMap],
-) -> Result<Resolved, JointMapError> {
+) -> Result<JointMapping, JointMapError> {
     if let Some(m) = user_maps.iter().find(|m| m.covers(clip_joint_names)) {
         return m.apply(clip, clip_joint_names, rig_joint_names);
     }
@@ -239,7 +232,7 @@ pub fn resolve(
             .map(|n| rig.get(n).copied())
             .collect();
         check_unique(clip, clip_joint_names, &clip_to_rig)?;
-        return Ok(Resolved {
+        return Ok(JointMapping {
             map_name: "identity".to_string(),
             clip_to_rig,
         });
@@ -426,7 +419,7 @@ mod tests {
 
     /// Under the resolved map every clip joint's parent must land on the rig joint's parent: this
     /// is what catches a swapped LeftShoulder/LeftArm or Neck/Neck1.
-    fn assert_hierarchy_preserved(b: &Bvh, r: &Resolved) {
+    fn assert_hierarchy_preserved(b: &Bvh, r: &JointMapping) {
         let rig = rig_names();
         assert_eq!(r.clip_to_rig.len(), b.joints.len());
         for (i, j) in b.joints.iter().enumerate() {

@@ -2,8 +2,8 @@
 //! joint heads are the centres of small "joint cube" helpers, and per-bone skin weights.
 //! Converted to metres with the feet on y = 0.
 
+use crate::body::Body;
 use crate::geometry::mesh::TriMesh;
-use crate::io::gltf_body::Body;
 use crate::io::obj::read_obj;
 use crate::rig::{Skeleton, Skin};
 use anyhow::{anyhow, bail, Context, Result};

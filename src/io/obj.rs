@@ -16,7 +16,7 @@
 
 use std::fmt;
 use std::fs;
-use std::io::{self, BufWriter, Write};
+use std::io::{self, Write};
 use std::ops::Range;
 use std::path::Path;
 
@@ -37,7 +37,7 @@ pub struct ObjMesh {
 /// Why an OBJ file could not be read; each message is one line naming the file.
 #[derive(Debug, Error)]
 pub enum ObjError {
-    #[error("cannot read {file}: {}", io_message(.cause))]
+    #[error("cannot read {file}: {}", exporters::atomic::io_message(.cause))]
     Read { file: String, cause: io::Error },
     #[error("{file}:{line}: {problem}")]
     Syntax {
@@ -156,21 +156,13 @@ pub fn parse_obj(text: &str, source_name: &str) -> Result<ObjMesh, ObjError> {
 
 /// Writes `mesh` as OBJ (`v`, `vt`, `f v/vt`), each `comment` line as a `#` line first.
 /// Numbers use Rust's shortest round-trip formatting, so reading the file back gives the same
-/// `f32` values. Writes `<path>.obj.tmp` and renames it, so `path` is never half-written.
-/// An error keeps its `io::ErrorKind` and its message names the file: `cannot write PATH: …`.
+/// `f32` values. Written atomically ([`exporters::atomic`]): `path` is never half-written, and
+/// an error keeps its `io::ErrorKind` and names the file: `cannot write PATH: …`.
 pub fn write_obj(path: &Path, mesh: &TriMesh, comment: &str) -> io::Result<()> {
-    let tmp = path.with_extension("obj.tmp");
-    let result = write_file(&tmp, mesh, comment).and_then(|()| fs::rename(&tmp, path));
-    result.map_err(|e| {
-        // Best effort: the write error is what the caller needs to see.
-        let _ = fs::remove_file(&tmp);
-        let message = format!("cannot write {}: {}", path.display(), io_message(&e));
-        io::Error::new(e.kind(), message)
-    })
+    exporters::atomic::write_atomic_with(path, |w| write_lines(w, mesh, comment))
 }
 
-fn write_file(path: &Path, mesh: &TriMesh, comment: &str) -> io::Result<()> {
-    let mut w = BufWriter::new(fs::File::create(path)?);
+fn write_lines(w: &mut impl Write, mesh: &TriMesh, comment: &str) -> io::Result<()> {
     for line in comment.lines() {
         writeln!(w, "# {line}")?;
     }
@@ -195,17 +187,7 @@ fn write_file(path: &Path, mesh: &TriMesh, comment: &str) -> io::Result<()> {
             }
         }
     }
-    let file = w.into_inner().map_err(|e| e.into_error())?;
-    file.sync_all()
-}
-
-/// `io::Error`'s message without the trailing " (os error N)", for one clean line.
-fn io_message(e: &io::Error) -> String {
-    let text = e.to_string();
-    match text.rfind(" (os error ") {
-        Some(i) if text.ends_with(')') => text[..i].to_string(),
-        _ => text,
-    }
+    Ok(())
 }
 
 /// The statement keyword and its arguments, with any `#` comment removed.

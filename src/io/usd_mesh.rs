@@ -5,13 +5,9 @@ use crate::geometry::TriMesh;
 use anyhow::{bail, Result};
 use std::path::Path;
 
-/// Extensions usd-core opens.
-pub const USD_EXTENSIONS: [&str; 4] = ["usd", "usda", "usdc", "usdz"];
-
+/// Whether usd-core opens `path` (by extension).
 pub fn is_usd(path: &Path) -> bool {
-    path.extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| USD_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
+    exporters::FileKind::of(path) == Some(exporters::FileKind::Usd)
 }
 
 /// The stage's one Mesh prim as a triangle mesh (a garment file holds one garment).

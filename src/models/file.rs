@@ -10,13 +10,13 @@
 //! timestamps or absolute paths. Checkpoints are the same format plus the Adam state.
 
 use super::pbns::{flat, Pbns, PbnsShape};
-use crate::eval::Metrics;
+use super::{Model, ModelKind};
+use crate::body::Body;
+use crate::fabric::Fabric;
 use crate::geometry::{FaceVaryingUv, TriMesh};
-use crate::io::gltf_body::Body;
-use crate::rig::{JointTransform, Skeleton, Skin};
-use crate::train::fabric::Fabric;
+use crate::metrics::Metrics;
+use crate::rig::{PlainSkeleton, Skeleton, Skin};
 use anyhow::{bail, Context, Result};
-use nalgebra::{Matrix4, Quaternion, UnitQuaternion, Vector3};
 use safetensors::{tensor::TensorView, Dtype, SafeTensors, View};
 use serde::{Deserialize, Serialize};
 use std::borrow::Cow;
@@ -24,35 +24,48 @@ use std::collections::HashMap;
 use std::path::Path;
 use tch::{Device, Kind, Tensor};
 
-pub const FORMAT: &str = "garmentbake.pbns";
-pub const VERSION: u32 = 1;
+/// One format for every model kind; the kind is in the metadata (`model.kind`).
+pub const FORMAT: &str = "garmentbake.model";
+pub const VERSION: u32 = 2;
 /// The one `__metadata__` key.
 pub const METADATA_KEY: &str = "garmentbake";
 
+/// The description every model file carries, whatever its kind.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ModelInfo {
     pub format: String,
     pub version: u32,
-    pub shape: PbnsShape,
-    pub skeleton: SkeletonInfo,
+    pub skeleton: PlainSkeleton,
     pub garment: GarmentInfo,
     pub body: BodyInfo,
     pub fabric: Fabric,
-    pub training: TrainingInfo,
-    pub history: Vec<EpochRecord>,
+    /// The model kind (`"kind"`) and what only that kind describes.
+    pub model: KindInfo,
 }
 
+/// What a model kind adds to the description; the tag chooses how the tensors are read.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct SkeletonInfo {
-    pub joint_names: Vec<String>,
-    pub parents: Vec<Option<usize>>,
-    pub rest_translations: Vec<[f32; 3]>,
-    /// Quaternions `[x, y, z, w]`.
-    pub rest_rotations: Vec<[f32; 4]>,
-    /// Column-major 4×4.
-    pub inverse_bind_matrices: Vec<[f32; 16]>,
+#[serde(tag = "kind", rename_all = "lowercase")]
+pub enum KindInfo {
+    Pbns(PbnsInfo),
+}
+
+impl KindInfo {
+    pub fn kind(&self) -> ModelKind {
+        match self {
+            KindInfo::Pbns(_) => ModelKind::Pbns,
+        }
+    }
+}
+
+/// A PBNS model's sizes, inputs, training settings and metric history.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PbnsInfo {
+    pub shape: PbnsShape,
     /// Joints whose rotations feed the MLP (6 values each): those that move the garment.
     pub feature_joints: Vec<usize>,
+    pub training: TrainingInfo,
+    pub history: Vec<EpochRecord>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -100,13 +113,28 @@ pub struct TrainingInfo {
     pub inpainted: usize,
 }
 
+/// The PBNS potential's weighted terms (mean over an epoch's steps).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct LossTerms {
+    pub edge: f64,
+    pub bend: f64,
+    pub collision: f64,
+    pub gravity: f64,
+    pub pin: f64,
+}
+
+impl LossTerms {
+    pub fn total(&self) -> f64 {
+        self.edge + self.bend + self.collision + self.gravity + self.pin
+    }
+}
+
 /// One epoch of the metric history.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EpochRecord {
     pub epoch: usize,
     pub loss: f64,
-    /// Mean weighted loss terms: edge, bend, collision, gravity, pin.
-    pub terms: [f64; 5],
+    pub terms: LossTerms,
     /// Training-step metrics (candidate nearest neighbours).
     pub train: Metrics,
     /// Exact metrics on the validation poses (every few epochs, and the last).
@@ -115,7 +143,7 @@ pub struct EpochRecord {
 
 /// Everything a model file holds.
 pub struct ModelFile {
-    pub model: Pbns,
+    pub model: Model,
     pub info: ModelInfo,
     /// The proximity skin (the plain-LBS baseline and the model's starting point).
     pub lbs: Skin,
@@ -129,6 +157,32 @@ impl ModelFile {
     pub fn skeleton(&self) -> &Skeleton {
         &self.body.skeleton
     }
+
+    pub fn kind(&self) -> ModelKind {
+        self.model.kind()
+    }
+
+    /// The PBNS network, or an error saying which kind the file holds instead.
+    pub fn pbns(&self) -> Result<&Pbns> {
+        match &self.model {
+            Model::Pbns(m) => Ok(m),
+        }
+    }
+}
+
+impl ModelInfo {
+    /// The PBNS description, or an error saying which kind the file holds instead.
+    pub fn pbns(&self) -> Result<&PbnsInfo> {
+        match &self.model {
+            KindInfo::Pbns(p) => Ok(p),
+        }
+    }
+
+    pub fn pbns_mut(&mut self) -> Result<&mut PbnsInfo> {
+        match &mut self.model {
+            KindInfo::Pbns(p) => Ok(p),
+        }
+    }
 }
 
 /// Writes `file` atomically (with `extra` tensors, e.g. optimizer state).
@@ -139,14 +193,10 @@ pub fn save(path: &Path, file: &ModelFile) -> Result<()> {
 }
 
 pub fn to_bytes(file: &ModelFile) -> Result<Vec<u8>> {
-    let m = &file.model;
-    let mut blobs: Vec<(String, Blob)> = Vec::new();
-    for (name, t) in m.parameters(true) {
-        blobs.push((name, Blob::float(t)));
-    }
-    blobs.push(("W.joints".into(), Blob::int(&m.joints)));
-    blobs.push(("W.weights".into(), Blob::float(&m.weights())));
-    blobs.push(("garment.rest".into(), Blob::float(&m.template)));
+    let mut blobs: Vec<(String, Blob)> = match &file.model {
+        Model::Pbns(m) => pbns_blobs(m),
+    };
+    blobs.push(("garment.rest".into(), Blob::points(&file.garment.positions)));
     let k = file.lbs.influences;
     blobs.push(("lbs.joints".into(), Blob::ints(&file.lbs.joint_indices, k)));
     blobs.push((
@@ -174,6 +224,18 @@ pub fn to_bytes(file: &ModelFile) -> Result<Vec<u8>> {
     Ok(safetensors::serialize(blobs, Some(meta))?)
 }
 
+/// The PBNS network's tensors: MLP, PSD basis, the sparse skin's slots and weights.
+fn pbns_blobs(m: &Pbns) -> Vec<(String, Blob)> {
+    let mut blobs: Vec<(String, Blob)> = m
+        .parameters(true)
+        .into_iter()
+        .map(|(name, t)| (name, Blob::float(t)))
+        .collect();
+    blobs.push(("W.joints".into(), Blob::int(&m.joints)));
+    blobs.push(("W.weights".into(), Blob::float(&m.weights())));
+    blobs
+}
+
 /// Reads only the description (for `inspect`).
 /// A stored tensor's name, shape and type.
 pub type TensorSummary = (String, Vec<usize>, String);
@@ -192,76 +254,71 @@ pub fn read_info(path: &Path) -> Result<(ModelInfo, Vec<TensorSummary>)> {
     Ok((info, tensors))
 }
 
-/// Loads a model file (or checkpoint) onto `device`.
-pub fn load(path: &Path, device: Device) -> Result<ModelFile> {
-    let bytes = read_bytes(path)?;
-    let st = parse(path, &bytes)?;
-    let info = info_of(path, &bytes)?;
-    let fail = |what: String| anyhow::anyhow!("{}: {what}", path.display());
-    let get = |name: &str| -> Result<TensorView> {
-        st.tensor(name)
-            .map_err(|_| fail(format!("missing tensor '{name}'")))
-    };
-    let shape = info.shape;
-    let (n, k) = (shape.vertices, shape.influences);
-    let mut mlp = Vec::new();
-    for i in 0..shape.layers {
-        let w = tensor(&get(&format!("mlp.{i}.weight"))?, device)?;
-        let b = tensor(&get(&format!("mlp.{i}.bias"))?, device)?;
-        mlp.push((w, b));
+/// A model file's tensors by name, with errors naming the file.
+struct Tensors<'a> {
+    path: &'a Path,
+    st: SafeTensors<'a>,
+    device: Device,
+}
+
+impl Tensors<'_> {
+    fn fail(&self, what: String) -> anyhow::Error {
+        anyhow::anyhow!("{}: {what}", self.path.display())
     }
-    let expect = |t: Tensor, dims: &[usize], name: &str| -> Result<Tensor> {
+
+    fn view(&self, name: &str) -> Result<TensorView<'_>> {
+        self.st
+            .tensor(name)
+            .map_err(|_| self.fail(format!("missing tensor '{name}'")))
+    }
+
+    fn get(&self, name: &str) -> Result<Tensor> {
+        tensor(&self.view(name)?, self.device)
+    }
+
+    /// The tensor `name`, which must have shape `dims`.
+    fn shaped(&self, name: &str, dims: &[usize]) -> Result<Tensor> {
+        let t = self.get(name)?;
         let want: Vec<i64> = dims.iter().map(|&d| d as i64).collect();
         if t.size() != want {
-            return Err(fail(format!(
+            return Err(self.fail(format!(
                 "tensor '{name}' has shape {:?}, expected {want:?}",
                 t.size()
             )));
         }
         Ok(t)
-    };
-    let joints = &info.skeleton.feature_joints;
-    if shape.features != 6 * joints.len() || joints.iter().any(|&j| j >= shape.joints) {
-        return Err(fail(format!(
-            "{} MLP inputs do not match the {} feature joints",
-            shape.features,
-            joints.len()
-        )));
     }
-    let model = Pbns {
-        shape,
-        feature_joints: joints.clone(),
-        mlp,
-        psd: expect(tensor(&get("psd")?, device)?, &[shape.width, 3 * n], "psd")?,
-        template: expect(
-            tensor(&get("garment.rest")?, device)?,
-            &[n, 3],
-            "garment.rest",
-        )?,
-        joints: expect(
-            tensor(&get("W.joints")?, device)?.to_kind(Kind::Int64),
-            &[n, k],
-            "W.joints",
-        )?,
-        logits: expect(tensor(&get("W.logits")?, device)?, &[n, k], "W.logits")?,
+}
+
+/// Loads a model file (or checkpoint) onto `device`; its metadata says which kind of model.
+pub fn load(path: &Path, device: Device) -> Result<ModelFile> {
+    let bytes = read_bytes(path)?;
+    let tensors = Tensors {
+        path,
+        st: parse(path, &bytes)?,
+        device,
     };
-    let lbs = skin_of(&get("lbs.joints")?, &get("lbs.weights")?)?;
-    let skeleton = info
-        .skeleton
-        .to_skeleton()
-        .map_err(|e| fail(e.to_string()))?;
+    let info = info_of(path, &bytes)?;
+    let (model, known): (Model, fn(&str) -> bool) = match &info.model {
+        KindInfo::Pbns(p) => (Model::Pbns(load_pbns(&tensors, p)?), is_pbns_tensor),
+    };
+    let lbs = skin_of(&tensors.view("lbs.joints")?, &tensors.view("lbs.weights")?)?;
+    let skeleton = Skeleton::from_plain(&info.skeleton).map_err(|e| tensors.fail(e.to_string()))?;
     let body = Body {
         name: info.body.name.clone(),
         mesh: TriMesh::new(
-            points(&get("body.points")?)?,
-            triangles(&get("body.triangles")?)?,
+            points(&tensors.view("body.points")?)?,
+            triangles(&tensors.view("body.triangles")?)?,
         ),
-        normals: points(&get("body.normals")?)?,
+        normals: points(&tensors.view("body.normals")?)?,
         skeleton,
-        skin: skin_of(&get("body.joints")?, &get("body.weights")?)?,
+        skin: skin_of(
+            &tensors.view("body.joints")?,
+            &tensors.view("body.weights")?,
+        )?,
     };
     let garment = TriMesh {
-        positions: points(&get("garment.rest")?)?,
+        positions: points(&tensors.view("garment.rest")?)?,
         triangles: info.garment.faces.clone(),
         uv: info.garment.uv.as_ref().map(|uv| FaceVaryingUv {
             coords: uv.coords.clone(),
@@ -270,21 +327,17 @@ pub fn load(path: &Path, device: Device) -> Result<ModelFile> {
     };
     garment
         .validate()
-        .map_err(|e| fail(format!("garment: {e}")))?;
+        .map_err(|e| tensors.fail(format!("garment: {e}")))?;
     body.mesh
         .validate()
-        .map_err(|e| fail(format!("body: {e}")))?;
-    let known = |name: &str| {
-        name.starts_with("mlp.")
-            || name.starts_with("W.")
-            || name.starts_with("lbs.")
-            || name.starts_with("body.")
-            || ["psd", "garment.rest"].contains(&name)
+        .map_err(|e| tensors.fail(format!("body: {e}")))?;
+    let common = |name: &str| {
+        name.starts_with("lbs.") || name.starts_with("body.") || name == "garment.rest"
     };
     let mut extra = Vec::new();
-    for name in st.names() {
-        if !known(name) {
-            extra.push((name.to_string(), tensor(&st.tensor(name)?, device)?));
+    for name in tensors.st.names() {
+        if !common(name) && !known(name) {
+            extra.push((name.to_string(), tensors.get(name)?));
         }
     }
     extra.sort_by(|a, b| a.0.cmp(&b.0));
@@ -298,6 +351,40 @@ pub fn load(path: &Path, device: Device) -> Result<ModelFile> {
     })
 }
 
+fn is_pbns_tensor(name: &str) -> bool {
+    name.starts_with("mlp.") || name.starts_with("W.") || name == "psd"
+}
+
+/// The PBNS network from its tensors, checked against its description.
+fn load_pbns(t: &Tensors, info: &PbnsInfo) -> Result<Pbns> {
+    let shape = info.shape;
+    let (n, k) = (shape.vertices, shape.influences);
+    let mut mlp = Vec::new();
+    for i in 0..shape.layers {
+        mlp.push((
+            t.get(&format!("mlp.{i}.weight"))?,
+            t.get(&format!("mlp.{i}.bias"))?,
+        ));
+    }
+    let joints = &info.feature_joints;
+    if shape.features != 6 * joints.len() || joints.iter().any(|&j| j >= shape.joints) {
+        return Err(t.fail(format!(
+            "{} MLP inputs do not match the {} feature joints",
+            shape.features,
+            joints.len()
+        )));
+    }
+    Ok(Pbns {
+        shape,
+        feature_joints: joints.clone(),
+        mlp,
+        psd: t.shaped("psd", &[shape.width, 3 * n])?,
+        template: t.shaped("garment.rest", &[n, 3])?,
+        joints: t.shaped("W.joints", &[n, k])?.to_kind(Kind::Int64),
+        logits: t.shaped("W.logits", &[n, k])?,
+    })
+}
+
 fn read_bytes(path: &Path) -> Result<Vec<u8>> {
     std::fs::read(path).with_context(|| format!("cannot read model {}", path.display()))
 }
@@ -305,6 +392,13 @@ fn read_bytes(path: &Path) -> Result<Vec<u8>> {
 fn parse<'a>(path: &Path, bytes: &'a [u8]) -> Result<SafeTensors<'a>> {
     SafeTensors::deserialize(bytes)
         .map_err(|e| anyhow::anyhow!("{}: not a safetensors file ({e:?})", path.display()))
+}
+
+/// The first fields of every description, read before the rest so an older file gets a clear error.
+#[derive(Deserialize)]
+struct FormatHeader {
+    format: String,
+    version: u32,
 }
 
 fn info_of(path: &Path, bytes: &[u8]) -> Result<ModelInfo> {
@@ -320,16 +414,18 @@ fn info_of(path: &Path, bytes: &[u8]) -> Result<ModelInfo> {
                 path.display()
             )
         })?;
-    let info: ModelInfo = serde_json::from_str(json)
+    let header: FormatHeader = serde_json::from_str(json)
         .with_context(|| format!("{}: invalid model description", path.display()))?;
-    if info.format != FORMAT || info.version != VERSION {
+    if header.format != FORMAT || header.version != VERSION {
         bail!(
-            "{}: model format {} v{}, this build reads {FORMAT} v{VERSION}",
+            "{}: model format {} v{}, this build reads {FORMAT} v{VERSION} (retrain the model with this build)",
             path.display(),
-            info.format,
-            info.version
+            header.format,
+            header.version
         );
     }
+    let info: ModelInfo = serde_json::from_str(json)
+        .with_context(|| format!("{}: invalid model description", path.display()))?;
     Ok(info)
 }
 
@@ -464,45 +560,6 @@ pub fn points_hash(points: &[[f32; 3]]) -> String {
         h = h.wrapping_mul(0x0100_0000_01b3);
     }
     format!("{h:016x}")
-}
-
-impl SkeletonInfo {
-    pub fn new(skeleton: &Skeleton, feature_joints: Vec<usize>) -> SkeletonInfo {
-        // The same plain arrays the exporters get.
-        let plain = crate::bake::skeleton_asset(skeleton);
-        SkeletonInfo {
-            joint_names: plain.joint_names,
-            parents: plain.parents,
-            rest_translations: plain.rest_translations,
-            rest_rotations: plain.rest_rotations,
-            inverse_bind_matrices: plain.inverse_bind_matrices,
-            feature_joints,
-        }
-    }
-
-    pub fn to_skeleton(&self) -> Result<Skeleton> {
-        let rest = self
-            .rest_translations
-            .iter()
-            .zip(&self.rest_rotations)
-            .map(|(t, r)| JointTransform {
-                translation: Vector3::from(*t),
-                rotation: UnitQuaternion::from_quaternion(Quaternion::new(r[3], r[0], r[1], r[2])),
-                scale: Vector3::repeat(1.0),
-            })
-            .collect();
-        let ibm = self
-            .inverse_bind_matrices
-            .iter()
-            .map(|m| Matrix4::from_column_slice(m))
-            .collect();
-        Ok(Skeleton::new(
-            self.joint_names.clone(),
-            self.parents.clone(),
-            rest,
-            ibm,
-        )?)
-    }
 }
 
 /// Fails unless `body` has the model's skeleton: same joints, parents, rest and binding.

@@ -1,7 +1,57 @@
-//! Neural garment models: the PBNS static (pose-driven) model, its inputs and its file format.
+//! Neural garment models (PBNS now; the dynamic model next), their inputs and the one model file
+//! that holds any of them, its kind named in the metadata.
 
 pub mod file;
 pub mod pbns;
 pub mod pose_features;
 
 pub use pbns::{Pbns, PbnsShape};
+use serde::{Deserialize, Serialize};
+use tch::Tensor;
+
+/// A trained garment model, of the kind its file's metadata names.
+pub enum Model {
+    Pbns(Pbns),
+}
+
+/// The model kinds a file can hold (the metadata's `model.kind`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ModelKind {
+    Pbns,
+}
+
+impl Model {
+    pub fn kind(&self) -> ModelKind {
+        match self {
+            Model::Pbns(_) => ModelKind::Pbns,
+        }
+    }
+}
+
+impl std::fmt::Display for ModelKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str(match self {
+            ModelKind::Pbns => "PBNS",
+        })
+    }
+}
+
+/// Items (poses, frames) per forward pass when predicting without gradients: bounds memory on
+/// long clips, and the same chunks everywhere keep training, eval and bake bit-identical.
+pub const PREDICT_CHUNK: usize = 64;
+
+/// `forward(start, len)` over `count` items in chunks of [`PREDICT_CHUNK`], without gradients,
+/// concatenated along the first dimension (one empty chunk when `count` is 0).
+pub fn predict_chunks(count: usize, mut forward: impl FnMut(usize, usize) -> Tensor) -> Tensor {
+    tch::no_grad(|| {
+        if count == 0 {
+            return forward(0, 0);
+        }
+        let parts: Vec<Tensor> = (0..count)
+            .step_by(PREDICT_CHUNK)
+            .map(|s| forward(s, PREDICT_CHUNK.min(count - s)))
+            .collect();
+        Tensor::cat(&parts, 0)
+    })
+}

@@ -165,6 +165,22 @@ impl Pbns {
         (linear * rest.unsqueeze(2)).sum_dim_intlist(-1, false, Kind::Float) + translation
     }
 
+    /// The garment of every pose of `poses` as one `[P, N, 3]` tensor, in chunks, no gradients.
+    pub fn predict(&self, poses: &PoseBatch) -> Tensor {
+        super::predict_chunks(poses.len(), |s, n| {
+            self.forward(&poses.slice(s, n)).vertices
+        })
+    }
+
+    /// [`Pbns::predict`] as points on the CPU, one list per pose.
+    pub fn predict_points(&self, poses: &PoseBatch) -> Vec<Vec<[f32; 3]>> {
+        let n = self.shape.vertices;
+        super::pose_features::tensor_points(&self.predict(poses))
+            .chunks_exact(n)
+            .map(<[_]>::to_vec)
+            .collect()
+    }
+
     pub fn forward(&self, batch: &PoseBatch) -> Output {
         let displacement = self.displacement(&batch.features);
         let rest = self.template.unsqueeze(0) + &displacement;

@@ -19,9 +19,7 @@ mod sheet;
 #[cfg(test)]
 mod tests;
 
-use std::fs;
-use std::io::{BufWriter, Write};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 pub use font::{draw_text, has_glyph};
 pub use framing::{Framing, FramingMode, View};
@@ -87,60 +85,11 @@ impl Default for SheetOptions {
     }
 }
 
-/// Failure to write a preview image; always names the destination path.
-#[derive(Debug, thiserror::Error)]
-pub enum PreviewError {
-    #[error("cannot write preview PNG {}: {source}", .path.display())]
-    Io {
-        path: PathBuf,
-        source: std::io::Error,
-    },
-    #[error("cannot encode preview PNG {}: {source}", .path.display())]
-    Encode {
-        path: PathBuf,
-        source: image::ImageError,
-    },
-}
-
-/// Write `img` as PNG to `path` atomically: encode to a sibling temp file, then
-/// rename, so a reader never sees a half-written preview.
-pub fn save_png(img: &image::RgbImage, path: &Path) -> Result<(), PreviewError> {
-    let tmp = temp_sibling(path);
-    let result = write_png(img, &tmp, path).and_then(|()| {
-        fs::rename(&tmp, path).map_err(|source| PreviewError::Io {
-            path: path.to_path_buf(),
-            source,
-        })
-    });
-    if result.is_err() {
-        // Best effort: the temp file may not even exist.
-        let _ = fs::remove_file(&tmp);
-    }
-    result
-}
-
-fn temp_sibling(path: &Path) -> PathBuf {
-    let mut name = path
-        .file_name()
-        .map(|n| n.to_os_string())
-        .unwrap_or_else(|| "preview.png".into());
-    name.push(format!(".tmp{}", std::process::id()));
-    path.with_file_name(name)
-}
-
-/// Encode into `tmp`; errors are reported against the final `path` the caller asked for.
-fn write_png(img: &image::RgbImage, tmp: &Path, path: &Path) -> Result<(), PreviewError> {
-    let io_err = |source| PreviewError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let file = fs::File::create(tmp).map_err(io_err)?;
-    let mut out = BufWriter::new(file);
-    img.write_to(&mut out, image::ImageFormat::Png)
-        .map_err(|source| PreviewError::Encode {
-            path: path.to_path_buf(),
-            source,
-        })?;
-    out.flush().map_err(io_err)?;
-    Ok(())
+/// Write `img` as PNG to `path` atomically ([`exporters::atomic`]), so a reader never sees a
+/// half-written preview; the error names the path.
+pub fn save_png(img: &image::RgbImage, path: &Path) -> std::io::Result<()> {
+    exporters::atomic::write_atomic_with(path, |w| {
+        img.write_to(w, image::ImageFormat::Png)
+            .map_err(std::io::Error::other)
+    })
 }

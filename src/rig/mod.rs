@@ -8,7 +8,7 @@ pub mod skin;
 pub mod weights;
 
 pub use animation::SkelAnimation;
-pub use skeleton::{JointTransform, Skeleton};
+pub use skeleton::{JointTransform, PlainSkeleton, Skeleton};
 pub use skin::Skin;
 
 #[derive(Debug, thiserror::Error)]

@@ -8,9 +8,28 @@
 //! scaled by the ratio of hip heights, and a constant vertical offset puts the stance feet on y = 0.
 
 use super::{SkelAnimation, Skeleton};
-use crate::io::bvh::Bvh;
-use crate::io::joint_map::Resolved;
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
+
+/// A motion-capture clip in world terms, whatever file format it was read from (BVH today):
+/// what retargeting needs and nothing about the file.
+#[derive(Clone, Debug)]
+pub struct CaptureClip {
+    /// World rest position of every clip joint (clip units), parents first.
+    pub rest_positions: Vec<Vector3<f64>>,
+    /// Per frame, per clip joint: world position and world rotation.
+    pub frames: Vec<Vec<(Vector3<f64>, UnitQuaternion<f64>)>>,
+    /// Seconds between frames.
+    pub frame_time: f64,
+}
+
+/// Which rig joint each clip joint drives (from a joint map, or by identical names).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct JointMapping {
+    /// The map's `name`, or `"identity"`.
+    pub map_name: String,
+    /// Per clip joint (clip order): the rig joint index it drives.
+    pub clip_to_rig: Vec<Option<usize>>,
+}
 
 /// The retargeted clip and the numbers worth reporting.
 #[derive(Clone, Debug)]
@@ -23,15 +42,20 @@ pub struct Retargeted {
     pub map_name: String,
 }
 
-/// Retargets every frame of `bvh` onto `skeleton` through the resolved joint map.
-pub fn retarget(bvh: &Bvh, map: &Resolved, skeleton: &Skeleton, name: &str) -> Retargeted {
-    let rig = RestMatch::new(bvh, map, skeleton);
+/// Retargets every frame of `clip` onto `skeleton` through the joint mapping.
+pub fn retarget(
+    clip: &CaptureClip,
+    map: &JointMapping,
+    skeleton: &Skeleton,
+    name: &str,
+) -> Retargeted {
+    let rig = RestMatch::new(clip, map, skeleton);
     let root = 0;
     let clip_root = rig.clip_of[root];
-    let frames: Vec<_> = (0..bvh.frame_count()).map(|f| bvh.world_pose(f)).collect();
+    let frames = &clip.frames;
     let mut translations = Vec::with_capacity(frames.len());
     let mut rotations = Vec::with_capacity(frames.len());
-    for pose in &frames {
+    for pose in frames {
         rotations.push(rig.local_rotations(skeleton, pose));
         let mut t: Vec<Vector3<f32>> = skeleton.rest.iter().map(|r| r.translation).collect();
         if let Some(k) = clip_root {
@@ -41,7 +65,7 @@ pub fn retarget(bvh: &Bvh, map: &Resolved, skeleton: &Skeleton, name: &str) -> R
     }
     let mut animation = SkelAnimation {
         name: name.to_string(),
-        fps: snap_rate(1.0 / bvh.frame_time),
+        fps: snap_rate(1.0 / clip.frame_time),
         translations,
         rotations,
     };
@@ -74,7 +98,7 @@ struct RestMatch {
 }
 
 impl RestMatch {
-    fn new(bvh: &Bvh, map: &Resolved, skeleton: &Skeleton) -> Self {
+    fn new(clip: &CaptureClip, map: &JointMapping, skeleton: &Skeleton) -> Self {
         let n = skeleton.joint_count();
         let mut clip_of = vec![None; n];
         for (k, rig) in map.clip_to_rig.iter().enumerate() {
@@ -93,7 +117,7 @@ impl RestMatch {
                 UnitQuaternion::from_matrix(&m.fixed_view::<3, 3>(0, 0).into_owned().cast::<f64>())
             })
             .collect();
-        let clip_pos = bvh.world_rest_positions();
+        let clip_pos = &clip.rest_positions;
         let mut correction: Vec<UnitQuaternion<f64>> = Vec::with_capacity(n);
         for j in 0..n {
             let pairs: Vec<_> = match (skeleton.parents[j], clip_of[j]) {
@@ -110,7 +134,7 @@ impl RestMatch {
                 skeleton.parents[j].map_or(UnitQuaternion::identity(), |p| correction[p]);
             correction.push(fit_rotation(&pairs).unwrap_or(inherited));
         }
-        let scale = hip_height(&body_pos, None) / hip_height(&clip_pos, Some(&clip_of)).max(1e-9);
+        let scale = hip_height(&body_pos, None) / hip_height(clip_pos, Some(&clip_of)).max(1e-9);
         RestMatch {
             clip_of,
             correction,

@@ -2,7 +2,8 @@
 //! inverse bind matrices (world → joint at bind time), as in UsdSkel and glTF skins.
 
 use super::RigError;
-use nalgebra::{Matrix4, UnitQuaternion, Vector3};
+use nalgebra::{Matrix4, Quaternion, UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
 
 /// A joint's local transform (scale kept for completeness; our rigs do not scale).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -33,6 +34,18 @@ impl JointTransform {
     }
 }
 
+/// A skeleton as plain arrays, the way files store it (model metadata, baked assets).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PlainSkeleton {
+    pub joint_names: Vec<String>,
+    pub parents: Vec<Option<usize>>,
+    pub rest_translations: Vec<[f32; 3]>,
+    /// Quaternions `[x, y, z, w]`.
+    pub rest_rotations: Vec<[f32; 4]>,
+    /// Column-major 4×4.
+    pub inverse_bind_matrices: Vec<[f32; 16]>,
+}
+
 #[derive(Clone, Debug, PartialEq)]
 pub struct Skeleton {
     pub joint_names: Vec<String>,
@@ -42,6 +55,41 @@ pub struct Skeleton {
 }
 
 impl Skeleton {
+    /// Plain arrays (unit scale is implied: our rigs do not scale).
+    pub fn to_plain(&self) -> PlainSkeleton {
+        PlainSkeleton {
+            joint_names: self.joint_names.clone(),
+            parents: self.parents.clone(),
+            rest_translations: self.rest.iter().map(|r| r.translation.into()).collect(),
+            rest_rotations: self.rest.iter().map(|r| r.rotation.coords.into()).collect(),
+            inverse_bind_matrices: self
+                .inverse_bind
+                .iter()
+                .map(|m| m.as_slice().try_into().expect("4x4"))
+                .collect(),
+        }
+    }
+
+    /// The skeleton of [`Skeleton::to_plain`], checked like [`Skeleton::new`].
+    pub fn from_plain(plain: &PlainSkeleton) -> Result<Skeleton, RigError> {
+        let rest = plain
+            .rest_translations
+            .iter()
+            .zip(&plain.rest_rotations)
+            .map(|(t, r)| JointTransform {
+                translation: Vector3::from(*t),
+                rotation: UnitQuaternion::from_quaternion(Quaternion::new(r[3], r[0], r[1], r[2])),
+                scale: Vector3::repeat(1.0),
+            })
+            .collect();
+        let ibm = plain
+            .inverse_bind_matrices
+            .iter()
+            .map(|m| Matrix4::from_column_slice(m))
+            .collect();
+        Skeleton::new(plain.joint_names.clone(), plain.parents.clone(), rest, ibm)
+    }
+
     /// Checks the invariants every consumer relies on: equal lengths, unique names, parents first.
     pub fn new(
         joint_names: Vec<String>,

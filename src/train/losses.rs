@@ -2,13 +2,10 @@
 //! `x: [B, N, 3]`. Every energy is summed over the garment and averaged over the batch; the
 //! metric next to it is the figure the papers report (and `eval` prints).
 
+use crate::fabric::{Fabric, GRAVITY};
 use crate::geometry::{Topology, TriMesh};
-use crate::train::fabric::Fabric;
 use anyhow::Result;
 use tch::{Device, Kind, Tensor};
-
-/// Standard gravity, m/s².
-pub const GRAVITY: f32 = 9.81;
 
 /// Constant tensors describing the garment for the losses.
 pub struct Cloth {

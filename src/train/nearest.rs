@@ -8,8 +8,8 @@
 //! an argmin). The garment moves little between refreshes, so the true nearest vertex stays in
 //! the list; the reference code instead called a CPU k-d tree from its GPU loop every step.
 
+use crate::body::Body;
 use crate::geometry::PointIndex;
-use crate::io::gltf_body::Body;
 use crate::rig::JointTransform;
 use rayon::prelude::*;
 use std::sync::Arc;

@@ -1,4 +1,4 @@
-//! `FABRIC.toml`: the physical parameters of the training potential, and the shipped presets
+//! `FABRIC.toml`: the physical parameters of the garment (training potential, metrics), the shipped presets
 //! (`samples/fabrics/*.toml`, also usable by name: `--config denim`).
 //!
 //! ```toml
@@ -15,12 +15,15 @@ use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
+/// Standard gravity, m/s² (the potential's gravity term and the metrics' energy).
+pub const GRAVITY: f32 = 9.81;
+
 /// Presets compiled in, so `--config NAME` works anywhere.
 pub const PRESETS: [(&str, &str); 4] = [
-    ("cotton", include_str!("../../samples/fabrics/cotton.toml")),
-    ("silk", include_str!("../../samples/fabrics/silk.toml")),
-    ("denim", include_str!("../../samples/fabrics/denim.toml")),
-    ("jersey", include_str!("../../samples/fabrics/jersey.toml")),
+    ("cotton", include_str!("../samples/fabrics/cotton.toml")),
+    ("silk", include_str!("../samples/fabrics/silk.toml")),
+    ("denim", include_str!("../samples/fabrics/denim.toml")),
+    ("jersey", include_str!("../samples/fabrics/jersey.toml")),
 ];
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

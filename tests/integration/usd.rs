@@ -3,13 +3,13 @@
 //! our own LBS, time-sampled points against the input cache, stage metadata, determinism, errors.
 #![cfg(feature = "usd")]
 
-mod common;
-use common::*;
+use crate::common::*;
 use exporters::asset;
 use garmentbake::bake::{animation_asset, skeleton_asset, skinned_mesh_asset, BODY_COLOR};
+use garmentbake::body::Body;
 use garmentbake::garment::Garment;
 use garmentbake::geometry::PointIndex;
-use garmentbake::io::gltf_body::{read_body, Body};
+use garmentbake::io::gltf_body::read_body;
 use garmentbake::motion::load_clip;
 use garmentbake::rig::{SkelAnimation, Skin};
 use std::path::Path;

@@ -1,13 +1,12 @@
 //! Retargeting real CMU clips onto the sample body: feet on the floor in stance, body upright.
 
-mod common;
-use common::*;
+use crate::common::*;
 use garmentbake::io::gltf_body::read_body;
 use garmentbake::motion::load_clip;
 
 /// Lowest vertex height of the vertices mostly skinned to `joints`, for every frame.
 fn lowest_vertex(
-    body: &garmentbake::io::gltf_body::Body,
+    body: &garmentbake::body::Body,
     anim: &garmentbake::rig::SkelAnimation,
     joints: &[usize],
 ) -> Vec<f32> {

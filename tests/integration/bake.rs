@@ -1,8 +1,7 @@
 //! `garmentbake bake` (PBNS → glTF) checked against `garmentbake eval` (the network) by readers we
 //! did not write: the Khronos validator and three.js (every frame of the baked clip), and Blender.
 
-mod common;
-use common::*;
+use crate::common::*;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
@@ -72,7 +71,7 @@ fn reference(dir: &Path) -> PathBuf {
     let pc2 = dir.join("ref.pc2");
     eval_131_02(&pc2);
     let file = garmentbake::models::file::load(model(), tch::Device::Cpu).unwrap();
-    let skin = file.model.skin();
+    let skin = file.pbns().unwrap().skin();
     let mesh =
         garmentbake::bake::skinned_mesh_asset("garment", &file.garment, None, &skin, [0.0; 3]);
     std::fs::write(

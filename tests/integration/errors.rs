@@ -1,8 +1,7 @@
 //! Bad input gets one clear line on stderr naming the file and the problem, a non-zero exit code,
 //! and never a panic trace.
 
-mod common;
-use common::*;
+use crate::common::*;
 use std::path::Path;
 
 /// Runs garmentbake expecting failure; returns the single stderr line.

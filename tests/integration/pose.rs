@@ -1,9 +1,9 @@
 //! `garmentbake pose` end to end, checked by readers we did not write: the Khronos glTF validator,
 //! three.js GLTFLoader in Node, and Blender's glTF importer.
 
-mod common;
-use common::*;
-use garmentbake::io::gltf_body::{read_body, Body};
+use crate::common::*;
+use garmentbake::body::Body;
+use garmentbake::io::gltf_body::read_body;
 use garmentbake::motion::load_clip;
 use garmentbake::rig::SkelAnimation;
 

@@ -3,29 +3,23 @@
 //! bad-input errors. Trainings here are tiny (a few poses, a narrow network, 1–2 epochs).
 
 use garmentbake::bake::{skeleton_asset, skinned_mesh_asset, BODY_COLOR};
+use garmentbake::body::Body;
+use garmentbake::fabric::{Fabric, GRAVITY};
 use garmentbake::garment::Garment;
 use garmentbake::geometry::TriMesh;
-use garmentbake::io::gltf_body::{read_body, Body};
+use garmentbake::io::gltf_body::read_body;
 use garmentbake::io::obj::write_obj;
 use garmentbake::models::file::{self, check_skeleton};
 use garmentbake::models::pose_features::tensor_points;
 use garmentbake::motion::load_clip;
-use garmentbake::train::fabric::Fabric;
-use garmentbake::train::losses::{collision, Cloth, GRAVITY};
-use garmentbake::train::{Inputs, Settings, Trainer};
+use garmentbake::train::losses::{collision, Cloth};
+use garmentbake::train::pbns::{Inputs, Settings, Trainer};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::{Mutex, OnceLock};
 
-mod common;
-use common::run_ok;
+use crate::common::{run_ok, sample};
 use tch::{Device, Kind, Tensor};
-
-fn sample(p: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("samples")
-        .join(p)
-}
 
 fn body() -> &'static Body {
     static BODY: OnceLock<Body> = OnceLock::new();
@@ -78,7 +72,7 @@ fn tiny_trainer(seed: u64) -> Trainer {
 fn trained(seed: u64, epochs: usize) -> Trainer {
     let mut t = tiny_trainer(seed);
     for _ in 0..epochs {
-        t.run_epoch(|_, _| {}).unwrap();
+        t.run_epoch_with(|_, _| {}).unwrap();
     }
     t
 }
@@ -187,7 +181,7 @@ fn save_load_round_trip_gives_identical_outputs() {
     let poses: Vec<_> = t.poses.validation.iter().map(|p| p.local.clone()).collect();
     let batch = t.model().batch(&t.file.body.skeleton, &poses, Device::Cpu);
     let a = tch::no_grad(|| tensor_points(&t.model().forward(&batch).vertices));
-    let b = tch::no_grad(|| tensor_points(&loaded.model.forward(&batch).vertices));
+    let b = tch::no_grad(|| tensor_points(&loaded.pbns().unwrap().forward(&batch).vertices));
     assert_eq!(a, b);
     check_skeleton(loaded.skeleton(), &body().skeleton, "body").unwrap();
     // Saving the loaded model again gives the same bytes.
@@ -239,19 +233,25 @@ fn tiny_model(seed: u64, name: &str) -> PathBuf {
 #[test]
 fn eval_writes_a_pc2_that_blender_plays() {
     let model = tiny_model(2, "eval.safetensors");
-    let (pc2, json) = (tmp("clip.pc2"), tmp("metrics.json"));
-    let out = run_ok(
-        gb().args(["eval", "--threads", "1", "--fps", "10", "--model"])
+    let pc2 = tmp("clip.pc2");
+    let eval = |json: bool| {
+        let mut cmd = gb();
+        cmd.args(["eval", "--threads", "1", "--fps", "10", "--model"])
             .arg(&model)
             .arg("--motion")
             .arg(sample("motions/131_02.bvh"))
             .arg("--out")
-            .arg(&pc2)
-            .arg("--json")
-            .arg(&json),
-    );
-    let text = String::from_utf8_lossy(&out.stdout);
+            .arg(&pc2);
+        if json {
+            cmd.arg("--json");
+        }
+        String::from_utf8_lossy(&run_ok(&mut cmd).stdout).into_owned()
+    };
+    let text = eval(false);
     assert!(text.contains("plain LBS"), "{text}");
+    let first = std::fs::read(&pc2).unwrap();
+    let report: serde_json::Value = serde_json::from_str(&eval(true)).unwrap();
+    assert_eq!(std::fs::read(&pc2).unwrap(), first, "eval is deterministic");
     let frames = load_clip(
         &sample("motions/131_02.bvh"),
         &[],
@@ -263,8 +263,6 @@ fn eval_writes_a_pc2_that_blender_plays() {
     .frame_count();
     let (version, points, samples, data) = read_pc2(&pc2);
     assert_eq!((version, points, samples), (1, 2808, frames));
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert_eq!(report["frames"], frames);
     assert!(report["metrics"]["model"]["edge_mm"].as_f64().unwrap() > 0.0);
     // The body-overlap split is part of the collided share, and the clip's overlap is reported.
@@ -645,7 +643,7 @@ fn balanced_poses_differ_by_the_threshold_and_recombined_ones_mix_real_limbs() {
 
 #[test]
 fn a_head_bowed_into_the_chest_is_flagged_as_body_overlap() {
-    use garmentbake::eval::PosedBody;
+    use garmentbake::body::PosedBody;
     use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
     let b = body();
     let sk = &b.skeleton;
@@ -703,15 +701,15 @@ fn recombine_adds_training_poses_and_records_them_in_the_model() {
         .unwrap_or_else(|| panic!("no pose line in {text}"));
     assert_eq!(extra, 2 * train, "{text}");
     let info = file::load(&out, Device::Cpu).unwrap().info;
-    assert_eq!(info.training.poses_recombined, extra);
-    assert_eq!(info.training.poses_train, train + extra);
+    assert_eq!(info.pbns().unwrap().training.poses_recombined, extra);
+    assert_eq!(info.pbns().unwrap().training.poses_train, train + extra);
     assert_eq!(info.fabric.name, "jersey");
     assert_eq!(info.fabric.collision, 250.0);
 }
 
 #[test]
 fn edge_error_and_strain_match_hand_values() {
-    use garmentbake::eval::Edges;
+    use garmentbake::metrics::Edges;
     // Two edges of rest length 1 m and 2 m; the first stretched by 10 cm, the second by 0.
     let rest = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 2.0, 0.0]];
     let edges = Edges::new(&rest, vec![[0, 1], [1, 2]]);
@@ -722,10 +720,9 @@ fn edge_error_and_strain_match_hand_values() {
 
 #[test]
 fn device_refresh_resolves_the_same_nearest_body_points_as_the_trees() {
-    use garmentbake::train::predict_tensor;
     let _g = serial();
     let mut t = trained(3, 1);
-    let x = predict_tensor(t.model(), t.train_batch());
+    let x = t.model().predict(t.train_batch());
     let poses = Tensor::arange(x.size()[0], (Kind::Int64, Device::Cpu));
     let distance = |t: &Trainer| {
         let (p, _) = t.correspondences().resolve(&poses, &x);

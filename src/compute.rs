@@ -1,0 +1,31 @@
+//! Where the tensors run: the device (`cpu`, `cuda`, `cuda:N`) and the CPU thread pools.
+
+use anyhow::{bail, Result};
+use tch::Device;
+
+/// Parses `cpu`, `cuda` or `cuda:N`; a CUDA device must be usable by this build.
+pub fn parse_device(s: &str) -> Result<Device> {
+    let device = match s {
+        "cpu" => Device::Cpu,
+        "cuda" => Device::Cuda(0),
+        _ => match s.strip_prefix("cuda:").and_then(|n| n.parse().ok()) {
+            Some(n) => Device::Cuda(n),
+            None => bail!("--device {s}: expected cpu, cuda or cuda:N"),
+        },
+    };
+    if device != Device::Cpu && !tch::Cuda::is_available() {
+        bail!(
+            "--device {s}: CUDA is not available to this build (libtorch without CUDA, or no GPU)"
+        );
+    }
+    Ok(device)
+}
+
+/// Thread budget: torch and rayon (nearest-neighbour queries, metrics) pools.
+pub fn set_threads(torch: usize, rayon: usize) {
+    tch::set_num_threads(torch.max(1) as i32);
+    // Fails only if the pool already exists (a second call in tests): keep that one.
+    let _ = rayon::ThreadPoolBuilder::new()
+        .num_threads(rayon.max(1))
+        .build_global();
+}

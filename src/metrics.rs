@@ -1,0 +1,159 @@
+//! Garment metrics of posed frames against the posed body: edge error and strain, bending,
+//! collided vertices (split at body self-overlap), gravity energy. Plain arrays on the CPU,
+//! exact nearest neighbours: shared by training validation, `eval` and the exporters' checks.
+
+use crate::body::{nearest_offsets, Body, PosedBody};
+use crate::fabric::GRAVITY;
+use crate::geometry::{face_normals, PointIndex, Topology, TriMesh};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// The PBNS metrics, averaged over frames.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Metrics {
+    /// Mean |e − e_T| over edges, millimetres.
+    pub edge_mm: f64,
+    /// Mean 1 − cos between the normals of face-adjacent triangles.
+    pub bend: f64,
+    /// Percentage of vertices inside the body (d·n < 0 w.r.t. the nearest body vertex).
+    pub collided_pct: f64,
+    /// The part of `collided_pct` whose nearest body vertex is itself inside the body (the body
+    /// overlaps itself there, e.g. a bowed head's chin sunk into the chest): no garment can be
+    /// outside both parts. Computed against posed bodies only (0 in training-step metrics).
+    #[serde(default)]
+    pub collided_overlap_pct: f64,
+    /// Gravitational potential energy Σ m g y, joules.
+    pub gravity_j: f64,
+}
+
+impl Metrics {
+    pub fn mean(frames: &[Metrics]) -> Metrics {
+        let n = frames.len().max(1) as f64;
+        let sum = |f: fn(&Metrics) -> f64| frames.iter().map(f).sum::<f64>() / n;
+        Metrics {
+            edge_mm: sum(|m| m.edge_mm),
+            bend: sum(|m| m.bend),
+            collided_pct: sum(|m| m.collided_pct),
+            collided_overlap_pct: sum(|m| m.collided_overlap_pct),
+            gravity_j: sum(|m| m.gravity_j),
+        }
+    }
+}
+
+/// Edges and their rest lengths: the edge-length metrics of a mesh.
+pub struct Edges {
+    pairs: Vec<[u32; 2]>,
+    rest: Vec<f32>,
+}
+
+impl Edges {
+    pub fn new(rest: &[[f32; 3]], pairs: Vec<[u32; 2]>) -> Edges {
+        Edges {
+            rest: pairs.iter().map(|&e| length(rest, e)).collect(),
+            pairs,
+        }
+    }
+
+    /// Mean |e − e_T| (metres).
+    pub fn mean_error(&self, x: &[[f32; 3]]) -> f64 {
+        let sum: f64 = self
+            .pairs
+            .iter()
+            .zip(&self.rest)
+            .map(|(&e, &r)| (length(x, e) - r).abs() as f64)
+            .sum();
+        sum / self.pairs.len().max(1) as f64
+    }
+
+    /// Mean |e − e_T| / e_T, percent (edges of zero rest length are skipped).
+    pub fn mean_strain_pct(&self, x: &[[f32; 3]]) -> f64 {
+        let (sum, n) = self
+            .pairs
+            .iter()
+            .zip(&self.rest)
+            .filter(|(_, &r)| r > 0.0)
+            .fold((0.0, 0usize), |(s, n), (&e, &r)| {
+                (s + ((length(x, e) - r).abs() / r) as f64, n + 1)
+            });
+        100.0 * sum / n.max(1) as f64
+    }
+}
+
+/// Body edges whose both ends lie within `reach` of the garment at rest: the skin under it.
+pub fn body_edges_under(body: &Body, garment_rest: &[[f32; 3]], reach: f32) -> Edges {
+    let index = PointIndex::new(garment_rest).expect("garment is finite and non-empty");
+    let p = &body.mesh.positions;
+    let near: Vec<bool> = p.par_iter().map(|&v| index.nearest(v).1 < reach).collect();
+    let pairs = Topology::new(&body.mesh)
+        .edges
+        .into_iter()
+        .filter(|e| e.iter().all(|&v| near[v as usize]))
+        .collect();
+    Edges::new(p, pairs)
+}
+
+/// What the metrics need to know about the garment.
+pub struct ClothGeometry {
+    pub edges: Edges,
+    triangles: Vec<[u32; 3]>,
+    hinges: Vec<[u32; 2]>,
+    mass: Vec<f32>,
+}
+
+impl ClothGeometry {
+    pub fn new(rest: &TriMesh, density: f32) -> ClothGeometry {
+        let topo = Topology::new(rest);
+        ClothGeometry {
+            edges: Edges::new(&rest.positions, topo.edges),
+            triangles: rest.triangles.clone(),
+            hinges: topo.hinges.iter().map(|h| h.faces).collect(),
+            mass: rest.vertex_areas().iter().map(|a| a * density).collect(),
+        }
+    }
+
+    /// Metrics of one posed frame against the posed body.
+    pub fn frame(&self, x: &[[f32; 3]], body: &PosedBody) -> Metrics {
+        let n = face_normals(x, &self.triangles);
+        let bend: f64 = self
+            .hinges
+            .iter()
+            .map(|&[a, b]| {
+                let (na, nb) = (n[a as usize], n[b as usize]);
+                1.0 - (na[0] * nb[0] + na[1] * nb[1] + na[2] * nb[2]) as f64
+            })
+            .sum();
+        let offsets = nearest_offsets(x, &body.points, &body.normals, &body.index);
+        let inside = offsets.iter().filter(|&&(_, d)| d < 0.0).count();
+        let at_overlap = offsets
+            .iter()
+            .filter(|&&(b, d)| d < 0.0 && body.overlap[b as usize])
+            .count();
+        let gravity: f64 = x
+            .iter()
+            .zip(&self.mass)
+            .map(|(p, m)| (m * GRAVITY * p[1]) as f64)
+            .sum();
+        Metrics {
+            edge_mm: 1e3 * self.edges.mean_error(x),
+            bend: bend / self.hinges.len().max(1) as f64,
+            collided_pct: 100.0 * inside as f64 / x.len().max(1) as f64,
+            collided_overlap_pct: 100.0 * at_overlap as f64 / x.len().max(1) as f64,
+            gravity_j: gravity,
+        }
+    }
+
+    /// Mean metrics over frames (in parallel).
+    pub fn frames(&self, garment: &[Vec<[f32; 3]>], bodies: &[PosedBody]) -> Metrics {
+        let per: Vec<Metrics> = garment
+            .par_iter()
+            .zip(bodies)
+            .map(|(x, b)| self.frame(x, b))
+            .collect();
+        Metrics::mean(&per)
+    }
+}
+
+fn length(p: &[[f32; 3]], [a, b]: [u32; 2]) -> f32 {
+    let (a, b) = (p[a as usize], p[b as usize]);
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}

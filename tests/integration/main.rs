@@ -1,0 +1,11 @@
+//! The integration tests: one binary (libtorch and pyo3 are linked once), a module per area, as
+//! ripgrep's tests/ are laid out. Run one area with `cargo test --test integration bake::`.
+
+mod common;
+
+mod bake;
+mod errors;
+mod pbns;
+mod pose;
+mod retarget;
+mod usd;
