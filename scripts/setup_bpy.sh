@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Opt-in: Blender as a Python module (PyPI `bpy` 4.5 LTS, a 373 MB wheel, Python 3.11) in
 # target/bpy-venv, for the slow test that imports our USD files into a real DCC
-# (`cargo test --test usd -- --ignored slow_blender`). Idempotent.
+# (`cargo test --test integration slow_blender -- --ignored`). Idempotent.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"

@@ -6,6 +6,7 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 bash scripts/setup.sh
 cargo fmt --all -- --check
+bash scripts/layers.sh
 cargo clippy --workspace --all-targets --quiet -- -D warnings
 bash tools/selftest.sh target/selftest >/dev/null
 # Two shared cores: tests that spawn Blender or Node run alongside, torch stays on one thread.

@@ -2,6 +2,7 @@
 //! where the tensors run, and machine-readable output.
 
 use crate::models::file::ModelFile;
+use crate::train::pbns::{set_training_threads, InputFiles, Inputs, RefreshMode, Settings};
 use anyhow::{bail, Result};
 use std::path::{Path, PathBuf};
 
@@ -64,4 +65,122 @@ pub struct OutputArgs {
     /// Print the report as JSON on stdout instead of text (no progress bars, no warnings).
     #[arg(long)]
     pub json: bool,
+}
+
+/// The documented training defaults, shared with the library (`Settings::DEFAULT`).
+pub const D: Settings = Settings::DEFAULT;
+
+/// Inputs and settings shared by `train` and `bench train`.
+#[derive(clap::Args)]
+pub struct TrainInputs {
+    /// Skinned body (glTF/glb); metres, Y-up.
+    #[arg(long)]
+    pub body: PathBuf,
+    /// Garment mesh in the body's rest pose: OBJ, or USD with one Mesh prim (.usd/.usda/.usdc/.usdz,
+    /// converted to metres, Y-up); sidecar NAME.toml: pinned vertices.
+    #[arg(long)]
+    pub garment: PathBuf,
+    /// The training clips (BVH): the poses come from them.
+    #[command(flatten)]
+    pub clips: ClipArgs,
+    /// Fabric: a FABRIC.toml or a preset name (cotton, silk, denim, jersey).
+    #[arg(long, default_value = "cotton")]
+    pub config: String,
+    /// Seed: same seed and inputs → byte-identical model.
+    #[arg(long, default_value_t = D.seed)]
+    pub seed: u64,
+    #[command(flatten)]
+    pub compute: ComputeArgs,
+    /// Poses per optimisation step.
+    #[arg(long, default_value_t = D.batch)]
+    pub batch: usize,
+    /// Initial Adam learning rate (cosine decay to a tenth).
+    #[arg(long, default_value_t = D.learning_rate)]
+    pub lr: f64,
+    /// MLP width = number of PSD blend shapes.
+    #[arg(long, default_value_t = D.width)]
+    pub width: usize,
+    /// Skin influences per vertex (4 or 8), fixed at initialisation.
+    #[arg(long, default_value_t = D.influences)]
+    pub influences: usize,
+    /// Keep the proximity blend weights instead of optimising them.
+    #[arg(long)]
+    pub fixed_weights: bool,
+    /// Pose balancing threshold (radians, per rotation component of the garment's joints).
+    #[arg(long, default_value_t = D.pose_threshold)]
+    pub pose_threshold: f32,
+    /// Extra training poses per balanced one, each taking every limb chain (legs, spine, neck and
+    /// head, arms) from a different real frame: covers pose combinations the clips lack.
+    #[arg(long, default_value_t = D.recombine)]
+    pub recombine: usize,
+    /// Epochs between refreshes of the nearest-body-vertex candidates.
+    #[arg(long, default_value_t = D.refresh_every)]
+    pub refresh_every: usize,
+    /// How candidates are refreshed: trees (CPU k-d trees on a worker thread), device (brute
+    /// force with cdist + topk on the training device), auto (device on CUDA, else trees).
+    #[arg(long, value_enum, default_value = "auto")]
+    pub refresh: RefreshArg,
+    /// Candidate body vertices kept per garment vertex.
+    #[arg(long, default_value_t = D.candidates)]
+    pub candidates: usize,
+    /// Learning rate of the blend-weight logits relative to --lr.
+    #[arg(long, default_value_t = D.weights_lr_scale)]
+    pub weights_lr_scale: f64,
+    /// Initial blend weights: copy the body's within this distance (metres) of it at rest and
+    /// interpolate them smoothly over the garment beyond (a skirt's hanging part).
+    #[arg(long, default_value_t = D.inpaint_beyond.unwrap())]
+    pub inpaint_beyond: f32,
+    /// Copy the body's weights by proximity everywhere (no inpainting).
+    #[arg(long)]
+    pub no_inpaint: bool,
+    /// Epochs between validation passes (exact metrics on the held-out poses).
+    #[arg(long, default_value_t = D.validate_every)]
+    pub validate_every: usize,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub enum RefreshArg {
+    Auto,
+    Trees,
+    Device,
+}
+
+impl TrainInputs {
+    /// Reads everything and builds the settings; warnings (garment fit) come back as lines.
+    pub fn load(&self, epochs: usize, strict: bool) -> Result<(Inputs, Settings, Vec<String>)> {
+        set_training_threads(self.compute.threads);
+        let files = InputFiles {
+            body: &self.body,
+            garment: &self.garment,
+            motions: &self.clips.motions,
+            maps: &self.clips.maps,
+            fps: self.clips.fps,
+            fabric: &self.config,
+        };
+        let (inputs, warnings) = Inputs::read(&files, strict)?;
+        let settings = Settings {
+            epochs,
+            batch: self.batch,
+            learning_rate: self.lr,
+            width: self.width,
+            influences: self.influences,
+            train_weights: !self.fixed_weights,
+            seed: self.seed,
+            pose_threshold: self.pose_threshold,
+            recombine: self.recombine,
+            refresh_every: self.refresh_every,
+            refresh: match self.refresh {
+                RefreshArg::Auto => RefreshMode::Auto,
+                RefreshArg::Trees => RefreshMode::Trees,
+                RefreshArg::Device => RefreshMode::Device,
+            },
+            candidates: self.candidates.max(1),
+            weights_lr_scale: self.weights_lr_scale,
+            validate_every: self.validate_every,
+            inpaint_beyond: (!self.no_inpaint).then_some(self.inpaint_beyond),
+            device: crate::compute::parse_device(&self.compute.device)?,
+            ..Settings::DEFAULT
+        };
+        Ok((inputs, settings, warnings))
+    }
 }

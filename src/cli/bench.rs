@@ -1,7 +1,6 @@
 //! `garmentbake bench train`: throughput of the training step and where its time goes.
 
-use super::args::OutputArgs;
-use super::train::InputArgs;
+use super::args::{OutputArgs, TrainInputs};
 use super::Execute;
 use crate::train::pbns::{RefreshMode, StepBench, Trainer};
 use anyhow::Result;
@@ -24,7 +23,7 @@ enum What {
 #[derive(clap::Args)]
 struct TrainBench {
     #[command(flatten)]
-    inputs: InputArgs,
+    inputs: TrainInputs,
     /// Timed steps (0: one refresh cycle, `--refresh-every` epochs of steps).
     #[arg(long, default_value_t = 0)]
     steps: usize,

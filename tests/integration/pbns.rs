@@ -495,7 +495,8 @@ fn resume_continues_from_the_checkpoint_and_inspect_prints_the_model() {
     assert!(r.status.success());
     let v: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
     let d = &v["description"];
-    assert_eq!(d["history"].as_array().unwrap().len(), 2);
+    assert_eq!(d["model"]["kind"], "pbns");
+    assert_eq!(d["model"]["history"].as_array().unwrap().len(), 2);
     assert_eq!(d["garment"]["faces"].as_array().unwrap().len(), 1888);
     assert_eq!(d["skeleton"]["joint_names"][0], "Hips");
     let r = gb().arg("inspect").arg(&out).output().unwrap();
