@@ -2,8 +2,9 @@
 //! Names follow UsdSkel (Skeleton, SkelAnimation, BlendShape, jointIndices / jointWeights).
 //! Units metres, Y-up; quaternions are `[x, y, z, w]`; matrices column-major.
 
-/// The joint hierarchy, parents before children.
-#[derive(Clone, Debug, Default, PartialEq)]
+/// The joint hierarchy, parents before children (also the plain form of the core's skeleton in
+/// model files).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Skeleton {
     pub joint_names: Vec<String>,
     pub parents: Vec<Option<usize>>,

@@ -90,13 +90,7 @@ pub fn write(asset: &BakedAsset, path: &Path) -> Result<(), ExportError> {
     match FileKind::written(path) {
         Some(FileKind::Gltf) => Ok(gltf::write(asset, path)?),
         Some(FileKind::Usd) => write_usd(asset, path),
-        _ => Err(unsupported(
-            path,
-            &format!(
-                "unknown extension; use {}",
-                FileKind::extension_list(&[FileKind::Gltf, FileKind::Usd], true)
-            ),
-        )),
+        _ => Err(wrong_extension(path, "", &[FileKind::Gltf, FileKind::Usd])),
     }
 }
 
@@ -106,14 +100,18 @@ pub fn write_point_cache(cache: &PointCache, path: &Path) -> Result<(), ExportEr
     match FileKind::written(path) {
         Some(FileKind::Pc2) => Ok(pc2::write(path, cache)?),
         Some(FileKind::Usd) => write_usd_cache(cache, path),
-        _ => Err(unsupported(
+        _ => Err(wrong_extension(
             path,
-            &format!(
-                "unknown point-cache extension; use {}",
-                FileKind::extension_list(&[FileKind::Pc2, FileKind::Usd], true)
-            ),
+            "point-cache ",
+            &[FileKind::Pc2, FileKind::Usd],
         )),
     }
+}
+
+/// "unknown {what}extension; use .a, .b or .c" for the written extensions of `kinds`.
+fn wrong_extension(path: &Path, what: &str, kinds: &[FileKind]) -> ExportError {
+    let list = FileKind::extension_list(kinds, true);
+    unsupported(path, &format!("unknown {what}extension; use {list}"))
 }
 
 fn unsupported(path: &Path, what: &str) -> ExportError {

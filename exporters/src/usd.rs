@@ -34,25 +34,27 @@ const STATIC_FPS: f64 = 24.0;
 
 /// Writes a skinned asset to `.usda`, `.usdc` or `.usdz` (the extension picks the format).
 pub fn write(asset: &BakedAsset, path: &Path) -> Result<(), UsdError> {
-    let invalid = |reason: String| UsdError::Invalid {
-        path: path.display().to_string(),
-        reason,
-    };
-    check_extension(path).map_err(invalid)?;
-    asset.check().map_err(invalid)?;
-    let spec = skel_spec(asset, &root_name(path)).map_err(invalid)?;
-    author("write_skel", &spec, path)
+    check_extension(path)
+        .and_then(|()| asset.check())
+        .and_then(|()| skel_spec(asset, &root_name(path)))
+        .map_err(invalid(path))
+        .and_then(|spec| author("write_skel", &spec, path))
 }
 
 /// Writes a point cache as one `Mesh` with `points` and `extent` sampled at every frame.
 pub fn write_point_cache(cache: &PointCache, path: &Path) -> Result<(), UsdError> {
-    let invalid = |reason: String| UsdError::Invalid {
+    check_extension(path)
+        .and_then(|()| cache.check())
+        .map_err(invalid(path))?;
+    author("write_point_cache", &point_cache_spec(cache), path)
+}
+
+/// A reason the input cannot be written to `path`, as the error.
+fn invalid(path: &Path) -> impl Fn(String) -> UsdError + '_ {
+    move |reason| UsdError::Invalid {
         path: path.display().to_string(),
         reason,
-    };
-    check_extension(path).map_err(invalid)?;
-    cache.check().map_err(invalid)?;
-    author("write_point_cache", &point_cache_spec(cache), path)
+    }
 }
 
 /// usd-core picks the format from the extension: anything but a written USD extension is

@@ -9,14 +9,7 @@ use crate::rig::{SkelAnimation, Skeleton, Skin};
 use exporters::asset;
 
 pub fn skeleton_asset(skeleton: &Skeleton) -> asset::Skeleton {
-    let plain = skeleton.to_plain();
-    asset::Skeleton {
-        joint_names: plain.joint_names,
-        parents: plain.parents,
-        rest_translations: plain.rest_translations,
-        rest_rotations: plain.rest_rotations,
-        inverse_bind_matrices: plain.inverse_bind_matrices,
-    }
+    skeleton.to_plain()
 }
 
 pub fn animation_asset(anim: &SkelAnimation) -> asset::SkelAnimation {

@@ -120,14 +120,14 @@ impl TriMesh {
         {
             return Err(MeshError::NonFinitePosition { vertex, position });
         }
+        if let Some((triangle, index)) = out_of_range(&self.triangles, n) {
+            return Err(MeshError::IndexOutOfRange {
+                triangle,
+                index,
+                vertex_count: n,
+            });
+        }
         for (t, tri) in self.triangles.iter().enumerate() {
-            if let Some(&index) = tri.iter().find(|&&i| i as usize >= n) {
-                return Err(MeshError::IndexOutOfRange {
-                    triangle: t,
-                    index,
-                    vertex_count: n,
-                });
-            }
             if let Some(index) = repeated_index(tri) {
                 return Err(MeshError::RepeatedIndex { triangle: t, index });
             }
@@ -288,16 +288,14 @@ impl FaceVaryingUv {
             });
         }
         let n = self.coords.len();
-        for (t, tri) in self.triangles.iter().enumerate() {
-            if let Some(&index) = tri.iter().find(|&&i| i as usize >= n) {
-                return Err(MeshError::UvIndexOutOfRange {
-                    triangle: t,
-                    index,
-                    uv_count: n,
-                });
-            }
+        match out_of_range(&self.triangles, n) {
+            Some((triangle, index)) => Err(MeshError::UvIndexOutOfRange {
+                triangle,
+                index,
+                uv_count: n,
+            }),
+            None => Ok(()),
         }
-        Ok(())
     }
 
     /// The UV triangles `kept` (in that order), with coordinates compacted to the used ones.
@@ -332,6 +330,14 @@ pub fn triangle_area(positions: &[[f32; 3]], tri: &[u32; 3]) -> f32 {
 }
 
 /// The first index that appears twice in a triangle, if any.
+/// The first triangle with an index ≥ `n`, and that index.
+fn out_of_range(triangles: &[[u32; 3]], n: usize) -> Option<(usize, u32)> {
+    triangles
+        .iter()
+        .enumerate()
+        .find_map(|(t, tri)| tri.iter().find(|&&i| i as usize >= n).map(|&i| (t, i)))
+}
+
 fn repeated_index(tri: &[u32; 3]) -> Option<u32> {
     if tri[0] == tri[1] || tri[0] == tri[2] {
         Some(tri[0])

@@ -438,22 +438,23 @@ struct Blob {
 
 impl Blob {
     fn float(t: &Tensor) -> Blob {
-        let shape = t.size().iter().map(|&d| d as usize).collect();
-        let v: Vec<f32> = flat(t, Kind::Float);
-        Blob {
-            dtype: Dtype::F32,
-            shape,
-            data: v.iter().flat_map(|x| x.to_le_bytes()).collect(),
-        }
+        Blob::tensor(t, Dtype::F32)
     }
 
     fn int(t: &Tensor) -> Blob {
-        let shape = t.size().iter().map(|&d| d as usize).collect();
-        let v: Vec<i32> = flat(t, Kind::Int);
+        Blob::tensor(t, Dtype::I32)
+    }
+
+    /// A tensor stored as `dtype` (F32 or I32).
+    fn tensor(t: &Tensor, dtype: Dtype) -> Blob {
+        let data = match dtype {
+            Dtype::I32 => le_bytes(flat::<i32>(t, Kind::Int), i32::to_le_bytes),
+            _ => le_bytes(flat::<f32>(t, Kind::Float), f32::to_le_bytes),
+        };
         Blob {
-            dtype: Dtype::I32,
-            shape,
-            data: v.iter().flat_map(|x| x.to_le_bytes()).collect(),
+            dtype,
+            shape: t.size().iter().map(|&d| d as usize).collect(),
+            data,
         }
     }
 
@@ -482,6 +483,10 @@ impl Blob {
     }
 }
 
+fn le_bytes<T>(v: Vec<T>, bytes: fn(T) -> [u8; 4]) -> Vec<u8> {
+    v.into_iter().flat_map(bytes).collect()
+}
+
 impl View for Blob {
     fn dtype(&self) -> Dtype {
         self.dtype
@@ -497,26 +502,24 @@ impl View for Blob {
     }
 }
 
-fn f32s(view: &TensorView) -> Result<Vec<f32>> {
-    if view.dtype() != Dtype::F32 {
-        bail!("expected F32 data, found {:?}", view.dtype());
+/// A view's little-endian 4-byte elements, which must be of type `dtype`.
+fn words<T>(view: &TensorView, dtype: Dtype, from: fn([u8; 4]) -> T) -> Result<Vec<T>> {
+    if view.dtype() != dtype {
+        bail!("expected {dtype:?} data, found {:?}", view.dtype());
     }
     Ok(view
         .data()
         .chunks_exact(4)
-        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .map(|b| from([b[0], b[1], b[2], b[3]]))
         .collect())
 }
 
+fn f32s(view: &TensorView) -> Result<Vec<f32>> {
+    words(view, Dtype::F32, f32::from_le_bytes)
+}
+
 fn i32s(view: &TensorView) -> Result<Vec<i32>> {
-    if view.dtype() != Dtype::I32 {
-        bail!("expected I32 data, found {:?}", view.dtype());
-    }
-    Ok(view
-        .data()
-        .chunks_exact(4)
-        .map(|b| i32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-        .collect())
+    words(view, Dtype::I32, i32::from_le_bytes)
 }
 
 fn tensor(view: &TensorView, device: Device) -> Result<Tensor> {

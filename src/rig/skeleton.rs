@@ -3,7 +3,6 @@
 
 use super::RigError;
 use nalgebra::{Matrix4, Quaternion, UnitQuaternion, Vector3};
-use serde::{Deserialize, Serialize};
 
 /// A joint's local transform (scale kept for completeness; our rigs do not scale).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -34,17 +33,9 @@ impl JointTransform {
     }
 }
 
-/// A skeleton as plain arrays, the way files store it (model metadata, baked assets).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct PlainSkeleton {
-    pub joint_names: Vec<String>,
-    pub parents: Vec<Option<usize>>,
-    pub rest_translations: Vec<[f32; 3]>,
-    /// Quaternions `[x, y, z, w]`.
-    pub rest_rotations: Vec<[f32; 4]>,
-    /// Column-major 4×4.
-    pub inverse_bind_matrices: Vec<[f32; 16]>,
-}
+/// A skeleton as plain arrays, the way files store it (model metadata, baked assets): the
+/// exporter-neutral type, so both read the same fields.
+pub use exporters::asset::Skeleton as PlainSkeleton;
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct Skeleton {
