@@ -2,7 +2,8 @@
 //! plain LBS) over the same frames. This is the reference the exporters are compared with.
 
 use crate::body::{Body, PosedBody};
-use crate::metrics::{ClothGeometry, Edges, Metrics};
+use crate::geometry::SurfaceIndex;
+use crate::metrics::{ClothGeometry, Edges, Inside, InsideFrame, Metrics};
 use crate::models::Pbns;
 use crate::rig::{JointTransform, Skeleton, Skin};
 use rayon::prelude::*;
@@ -42,6 +43,8 @@ pub struct Comparison {
     pub body_strain_pct: f64,
     /// Body vertices inside another part of the body (see [`crate::body::self_overlap`]), per frame.
     pub body_overlap: Vec<usize>,
+    /// Vertices inside the body by winding number, and how deep, one per series.
+    pub inside: Vec<Inside>,
 }
 
 /// Mean metrics of several garment series (e.g. model and plain LBS) over the same poses; the
@@ -58,13 +61,19 @@ pub fn compare(
         strain: Vec<f64>,
         body_strain: f64,
         overlap: usize,
+        inside: Vec<InsideFrame>,
     }
     let per_frame: Vec<Frame> = poses
         .par_iter()
         .enumerate()
         .map(|(f, pose)| {
             let posed = PosedBody::new(body, pose);
+            let surface = SurfaceIndex::new(&posed.points, &body.mesh.triangles);
             Frame {
+                inside: series
+                    .iter()
+                    .map(|s| InsideFrame::of(&s[f], &posed, &surface))
+                    .collect(),
                 metrics: series
                     .iter()
                     .map(|s| geometry.frame(&s[f], &posed))
@@ -88,5 +97,11 @@ pub fn compare(
             .collect(),
         body_strain_pct: per_frame.iter().map(|m| m.body_strain).sum::<f64>() / frames,
         body_overlap: per_frame.iter().map(|m| m.overlap).collect(),
+        inside: (0..series.len())
+            .map(|k| {
+                let frames: Vec<&InsideFrame> = per_frame.iter().map(|m| &m.inside[k]).collect();
+                Inside::of(&frames)
+            })
+            .collect(),
     }
 }

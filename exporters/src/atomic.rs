@@ -103,3 +103,32 @@ pub fn replace_via<E: From<std::io::Error>>(
     }
     result
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_writer_failing_midway_keeps_the_old_file_and_leaves_no_temp() {
+        let dir = std::env::temp_dir().join(format!("atomic-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("out.bin");
+        std::fs::write(&path, b"old").unwrap();
+        let err = write_atomic_with(&path, |w| {
+            w.write_all(&[7u8; 100_000])?;
+            Err(std::io::Error::other("disk full"))
+        })
+        .unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            format!("cannot write {}: disk full", path.display())
+        );
+        assert_eq!(std::fs::read(&path).unwrap(), b"old");
+        assert!(!temp_path(&path).exists());
+        write_atomic(&path, b"new").unwrap();
+        assert_eq!(std::fs::read(&path).unwrap(), b"new");
+        let names: Vec<_> = std::fs::read_dir(&dir).unwrap().collect();
+        assert_eq!(names.len(), 1);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

@@ -11,6 +11,7 @@ pub mod mesh;
 pub mod nearest;
 pub mod normals;
 pub mod topology;
+pub mod winding;
 
 #[cfg(test)]
 pub(crate) mod test_meshes;
@@ -20,6 +21,7 @@ pub use mesh::{FaceVaryingUv, MeshError, TriMesh};
 pub use nearest::{NearestError, PointIndex};
 pub use normals::{face_normals, vertex_normals};
 pub use topology::{Hinge, Topology};
+pub use winding::SurfaceIndex;
 
 /// The vector type used for geometric arithmetic.
 pub type Vec3 = nalgebra::Vector3<f32>;

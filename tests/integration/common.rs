@@ -155,3 +155,27 @@ pub fn usd_check(args: &[&str]) -> (bool, serde_json::Value) {
     });
     (out.status.success(), json)
 }
+
+/// A target path that is an existing folder holding an "old output" file: writing the whole file
+/// works, the final rename over the folder fails. Returns (target, the old file inside it).
+pub fn occupied_target(dir: &Path, name: &str) -> (PathBuf, PathBuf) {
+    let target = dir.join(name);
+    std::fs::create_dir_all(&target).expect("create the occupying folder");
+    let old = target.join("old-output");
+    std::fs::write(&old, b"old bytes").expect("write the old output");
+    (target, old)
+}
+
+/// After a failed write into `dir`: the old output is unchanged and nothing else is there.
+pub fn assert_left_untouched(dir: &Path, old: &Path) {
+    assert_eq!(std::fs::read(old).expect("old output kept"), b"old bytes");
+    let names: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(
+        names.len(),
+        1,
+        "a temporary file was left behind: {names:?}"
+    );
+}

@@ -4,11 +4,11 @@
 use crate::common::*;
 use std::path::Path;
 
-/// Runs garmentbake expecting failure; returns the single stderr line.
+/// Runs garmentbake expecting the bad-input failure (exit code 2); returns the single stderr line.
 fn fails(args: &[&str]) -> String {
     let out = garmentbake(args);
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert!(!out.status.success(), "expected failure for {args:?}");
+    assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
     assert!(!stderr.contains("panicked"), "panic: {stderr}");
     let lines: Vec<&str> = stderr.lines().filter(|l| !l.trim().is_empty()).collect();
     assert_eq!(lines.len(), 1, "one line expected, got: {stderr}");
@@ -102,7 +102,11 @@ fn glb_without_a_skin_is_not_a_body() {
 }
 
 #[test]
-fn unwritable_output_leaves_nothing_behind() {
+fn a_write_that_fails_late_leaves_the_old_output_and_no_temp_file() {
+    let dir = out_dir("late_write_failure");
+    // The whole file is written, then the final rename fails: the target is a folder that holds
+    // the "old output". It must stay as it was, and no temporary file may remain.
+    let (target, old) = occupied_target(&dir, "x.glb");
     let msg = fails(&[
         "pose",
         "--body",
@@ -110,16 +114,34 @@ fn unwritable_output_leaves_nothing_behind() {
         "--motion",
         sample("motions/131_01.bvh").to_str().unwrap(),
         "--out",
-        "/nonexistent-dir/x.glb",
+        target.to_str().unwrap(),
     ]);
-    assert!(msg.contains("/nonexistent-dir/x.glb"), "{msg}");
+    assert!(msg.contains(target.to_str().unwrap()), "{msg}");
+    assert_left_untouched(&dir, &old);
 }
 
 #[test]
 fn every_command_has_help() {
-    for cmd in ["inspect", "pose", "preview"] {
-        let out = garmentbake_ok(&[cmd, "--help"]);
-        assert!(out.contains("Usage: garmentbake"), "{cmd}: {out}");
+    let commands: &[&[&str]] = &[
+        &["inspect"],
+        &["pose"],
+        &["preview"],
+        &["train"],
+        &["eval"],
+        &["bake"],
+        &["bench", "train"],
+    ];
+    for cmd in commands {
+        let out = garmentbake_ok(&[cmd, &["--help"][..]].concat());
+        assert!(out.contains("Usage: garmentbake"), "{cmd:?}: {out}");
+        assert!(out.contains("--help"), "{cmd:?}: {out}");
+    }
+    // The top-level help lists every command.
+    let top = garmentbake_ok(&["--help"]);
+    for cmd in [
+        "inspect", "pose", "preview", "train", "eval", "bake", "bench",
+    ] {
+        assert!(top.contains(&format!("  {cmd}")), "{cmd} missing: {top}");
     }
     let top = garmentbake_ok(&["--help"]);
     assert!(top.contains("metres, Y-up"), "{top}");

@@ -5,6 +5,7 @@ mod common;
 
 mod bake;
 mod errors;
+mod metrics;
 mod pbns;
 mod pose;
 mod retarget;

@@ -10,6 +10,7 @@ use garmentbake::geometry::TriMesh;
 use garmentbake::io::gltf_body::read_body;
 use garmentbake::io::obj::write_obj;
 use garmentbake::models::file::{self, check_skeleton};
+use garmentbake::models::pbns::flat;
 use garmentbake::models::pose_features::tensor_points;
 use garmentbake::motion::load_clip;
 use garmentbake::train::losses::{collision, Cloth};
@@ -145,27 +146,45 @@ fn loss_terms_match_hand_computed_values() {
 #[test]
 fn trained_weights_stay_sparse_non_negative_and_normalised() {
     let _g = serial();
-    let t = trained(3, 2);
-    let before = t.file.lbs.clone();
-    let skin = t.model().skin();
-    let k = t.model().shape.influences;
-    assert_eq!(skin.influences, k);
-    let mut changed = 0.0f32;
-    for v in 0..skin.vertex_count() {
-        let w: Vec<(usize, f32)> = skin.vertex(v).collect();
-        assert!(w.len() <= k);
-        assert!(w.iter().all(|&(_, x)| x >= 0.0 && x.is_finite()));
-        let sum: f32 = w.iter().map(|x| x.1).sum();
-        assert!((sum - 1.0).abs() < 1e-5, "vertex {v}: sum {sum}");
-        let dense = |s: &garmentbake::rig::Skin| {
-            let mut d = [0.0f32; 64];
-            s.vertex(v).for_each(|(j, x)| d[j] += x);
-            d
-        };
-        let (a, b) = (dense(&skin), dense(&before));
-        changed += a.iter().zip(&b).map(|(x, y)| (x - y).abs()).sum::<f32>();
+    let mut t = tiny_trainer(3);
+    let raw = |t: &Trainer| -> Vec<f32> { flat(&t.model().weights(), Kind::Float) };
+    let joints: Vec<i64> = flat(&t.model().joints, Kind::Int64);
+    let before = raw(&t);
+    for _ in 0..2 {
+        t.run_epoch_with(|_, _| {}).unwrap();
     }
-    assert!(changed > 0.0, "training did not touch the weights");
+    let after = raw(&t);
+    // The network's own weights (softmax over each vertex's fixed joint slots), not the skin
+    // `Skin::from_sparse` cleans up: finite, non-negative, summing to one per vertex, and slots
+    // that held no joint stay exactly zero.
+    let k = t.model().shape.influences;
+    for (v, w) in after.chunks_exact(k).enumerate() {
+        assert!(
+            w.iter().all(|x| x.is_finite() && *x >= 0.0),
+            "vertex {v}: {w:?}"
+        );
+        let sum: f32 = w.iter().sum();
+        assert!((sum - 1.0).abs() < 1e-5, "vertex {v}: sum {sum}");
+        for (slot, (&x, &b)) in w.iter().zip(&before[v * k..(v + 1) * k]).enumerate() {
+            if b == 0.0 {
+                assert_eq!(
+                    x,
+                    0.0,
+                    "vertex {v} slot {slot} (joint {})",
+                    joints[v * k + slot]
+                );
+            }
+        }
+    }
+    let moved = after
+        .iter()
+        .zip(&before)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    assert!(
+        moved > 1e-4,
+        "training moved no weight (max change {moved})"
+    );
 }
 
 #[test]
@@ -285,8 +304,9 @@ fn eval_writes_a_pc2_that_blender_plays() {
         text.contains("inside another part of the skinned body"),
         "{text}"
     );
-    if Command::new("blender").arg("--version").output().is_err() {
-        eprintln!("blender not installed: skipping the independent PC2 read");
+    // CI has Blender (scripts/setup.sh installs it): only an explicit opt-out skips the check.
+    if std::env::var_os("GARMENTBAKE_SKIP_BLENDER").is_some() {
+        eprintln!("GARMENTBAKE_SKIP_BLENDER set: skipping the independent PC2 read");
         return;
     }
     let result = tmp("blender.json");
@@ -765,4 +785,65 @@ fn sample_garments_are_fitted_and_clean() {
     let (lo, hi) = shirt.mesh.bounds();
     // Hem above the crotch, collar below the chin of the 1.67 m body.
     assert!(lo[1] > 0.8 && hi[1] < 1.55, "{lo:?} {hi:?}");
+}
+
+#[test]
+fn a_short_training_lowers_the_loss_and_beats_plain_lbs_inside_the_body() {
+    use garmentbake::eval::{compare, lbs_frames, model_frames};
+    use garmentbake::metrics::{body_edges_under, ClothGeometry};
+    let _g = serial();
+    let b = body();
+    let inputs = Inputs {
+        body: b.clone(),
+        garment: Garment::read(&sample("garments/skirt.obj")).unwrap(),
+        fabric: Fabric::load("cotton").unwrap(),
+        clips: vec![clip_at("131_01.bvh", 30.0)],
+        motion_names: vec!["131_01.bvh".into()],
+    };
+    let settings = Settings {
+        epochs: 6,
+        batch: 8,
+        width: 16,
+        seed: 4,
+        pose_threshold: 0.3,
+        ..Settings::default()
+    };
+    let mut t = Trainer::new(inputs, settings).unwrap();
+    let first = t.run_epoch_with(|_, _| {}).unwrap().loss;
+    let mut last = first;
+    for _ in 1..6 {
+        last = t.run_epoch_with(|_, _| {}).unwrap().loss;
+    }
+    eprintln!("{} training poses", t.poses.train.len());
+    assert!(last < 0.7 * first, "loss {first} → {last}");
+    // A slice of a clip the model never saw (131_02, every 3rd frame at 10 fps).
+    let anim = clip_at("131_02.bvh", 10.0);
+    let poses: Vec<_> = (0..anim.frame_count())
+        .step_by(3)
+        .map(|f| anim.local_pose(f))
+        .collect();
+    let file = t.model_file();
+    let model = model_frames(t.model(), &b.skeleton, &poses, Device::Cpu);
+    let lbs = lbs_frames(&file.lbs, &file.garment.positions, &b.skeleton, &poses);
+    let geometry = ClothGeometry::new(&file.garment, 0.15);
+    let under = body_edges_under(b, &file.garment.positions, 0.02);
+    let c = compare(&geometry, &[&model, &lbs], b, &under, &poses);
+    let (m, l) = (c.inside[0].inside_pct, c.inside[1].inside_pct);
+    eprintln!(
+        "{} frames: inside the body (winding) model {m:.2} %, LBS {l:.2} %; loss {first:.3} → {last:.3}",
+        poses.len()
+    );
+    assert!(m < 0.85 * l, "model {m:.2} % vs LBS {l:.2} %");
+}
+
+fn clip_at(name: &str, fps: f32) -> garmentbake::rig::SkelAnimation {
+    let b = body();
+    load_clip(
+        &sample(&format!("motions/{name}")),
+        &[],
+        &b.skeleton,
+        Some(fps),
+    )
+    .unwrap()
+    .animation
 }
