@@ -15,7 +15,7 @@ $gb train --body samples/body.glb --garment samples/garments/skirt.obj \
   --motion samples/motions/01_01.bvh --motion samples/motions/131_01.bvh \
   --epochs "$epochs" --seed 1 --out runs/skirt_quick.safetensors
 
-echo "== evaluate on 131_02 (never trained on): model vs plain LBS"
+echo "== evaluate on 131_02 (not trained on; the validation clip the recipes were chosen on): model vs plain LBS"
 $gb eval --model runs/skirt_quick.safetensors --motion samples/motions/131_02.bvh --out out/131_02_skirt.pc2
 
 echo "== bake (blend shapes within 1 mm of the network) to glTF and USD"

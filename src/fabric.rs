@@ -4,7 +4,7 @@
 //! ```toml
 //! name = "cotton"
 //! edge = 50.0        # λe: stretch stiffness (J/m² per m² of edge error)
-//! bend = 1.0e-3      # λb: bending weight; depends on mesh resolution (see docs/pbns.md)
+//! bend = 1.0e-3      # λb: bending weight (summed over hinges: tune it per garment mesh)
 //! density = 0.15     # kg/m² (gravity: vertex mass = vertex area × density)
 //! # optional: collision = 25.0, margin = 0.004, pin = 1000.0,
 //! # pinned = [..] (replaces the garment sidecar's pin set),

@@ -15,8 +15,9 @@ use std::path::PathBuf;
 ///
 /// Poses are taken from the clips (retargeted onto the body), balanced (a frame is kept only if
 /// it differs enough from every kept one in the joints that move the garment) and split 85/15
-/// into train / validation (held-out frames of the training clips; judge the model on a clip it
-/// never saw with `garmentbake eval`). The model file (.safetensors) is self-contained:
+/// into train / validation (held-out frames of the training clips). Judge the model with
+/// `garmentbake eval` on other clips: a clip used to choose settings (epochs, fabric, width) is a
+/// validation clip; only a clip used for nothing is a test clip. The model file (.safetensors) is self-contained:
 /// `garmentbake eval`, `bake` and `inspect` need nothing else. A checkpoint with the optimizer
 /// state is written next to it every epoch (NAME.ckpt.safetensors); `--resume` continues from it.
 #[derive(clap::Args)]
