@@ -151,10 +151,17 @@ fn full_basis_replays_the_network_in_threejs() {
 
 #[test]
 fn dropping_blend_shapes_fails_the_1_mm_replay_check() {
-    // The negative case of the tolerance checks: one target cannot carry the corrective shapes.
+    // The negative case of the tolerance checks. The 8-influence model pruned to 4 needs its
+    // corrective blend shapes (pruning alone costs tens of mm); one target cannot carry them, so
+    // the same three.js replay check must see more than 1 mm.
+    INFLUENCES.with(|i| i.set(8));
     let dir = out_dir("bake_one_target");
     reference(&dir);
-    let glb = bake(&dir, "out.glb", &["--max-targets", "1"]);
+    let glb = bake(
+        &dir,
+        "out.glb",
+        &["--influences", "4", "--max-targets", "1"],
+    );
     let err = threejs_max_error(&glb, &dir, FRAMES_131_02_AT_30);
     eprintln!("1 target: three.js vs eval max {:.3} mm", err * 1e3);
     assert!(err > 1e-3, "max error {:.4} mm", err * 1e3);
@@ -205,7 +212,8 @@ fn blender_plays_the_baked_garment_with_8_influences() {
         let reference: Vec<[f32; 3]> = map.iter().map(|&v| cache[f][v as usize]).collect();
         let err = max_distance(&blender, &reference);
         eprintln!("Blender vs eval, frame {f}: max {:.4} mm", err * 1e3);
-        assert!(err < 1e-3, "frame {f}: {:.3} mm", err * 1e3);
+        // Measured at most 0.13 mm (frame 311: 16 of the 8-influence model's targets).
+        assert!(err < 0.5e-3, "frame {f}: {:.3} mm", err * 1e3);
     }
 }
 
@@ -296,5 +304,6 @@ fn usd_bake_replays_the_network_in_usdskel_and_the_usd_cache_equals_the_pc2() {
         "UsdSkel replay vs eval: max {} mm over {} frames",
         replay["max_mm"], replay["compared_frames"]
     );
-    assert!(replay["max_mm"].as_f64().unwrap() <= 0.5);
+    // Measured 0.0005 mm: f32 noise; ten times that fails a real replay error.
+    assert!(replay["max_mm"].as_f64().unwrap() <= 0.005);
 }
