@@ -68,7 +68,7 @@ pub struct OutputArgs {
 }
 
 /// The documented training defaults, shared with the library (`Settings::DEFAULT`).
-pub const D: Settings = Settings::DEFAULT;
+pub const TRAIN_DEFAULTS: Settings = Settings::DEFAULT;
 
 /// Inputs and settings shared by `train` and `bench train`.
 #[derive(clap::Args)]
@@ -87,54 +87,54 @@ pub struct TrainInputs {
     #[arg(long, default_value = "cotton")]
     pub config: String,
     /// Seed: same seed and inputs → byte-identical model.
-    #[arg(long, default_value_t = D.seed)]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.seed)]
     pub seed: u64,
     #[command(flatten)]
     pub compute: ComputeArgs,
     /// Poses per optimisation step.
-    #[arg(long, default_value_t = D.batch)]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.batch)]
     pub batch: usize,
     /// Initial Adam learning rate (cosine decay to a tenth).
-    #[arg(long, default_value_t = D.learning_rate)]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.learning_rate)]
     pub lr: f64,
     /// MLP width = number of PSD blend shapes.
-    #[arg(long, default_value_t = D.width)]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.width)]
     pub width: usize,
     /// Skin influences per vertex (4 or 8), fixed at initialisation.
-    #[arg(long, default_value_t = D.influences)]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.influences)]
     pub influences: usize,
     /// Keep the proximity blend weights instead of optimising them.
     #[arg(long)]
     pub fixed_weights: bool,
     /// Pose balancing threshold (radians, per rotation component of the garment's joints).
-    #[arg(long, default_value_t = D.pose_threshold)]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.pose_threshold)]
     pub pose_threshold: f32,
     /// Extra training poses per balanced one, each taking every limb chain (legs, spine, neck and
     /// head, arms) from a different real frame: covers pose combinations the clips lack.
-    #[arg(long, default_value_t = D.recombine)]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.recombine)]
     pub recombine: usize,
     /// Epochs between refreshes of the nearest-body-vertex candidates.
-    #[arg(long, default_value_t = D.refresh_every)]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.refresh_every)]
     pub refresh_every: usize,
     /// How candidates are refreshed: trees (CPU k-d trees on a worker thread), device (brute
     /// force with cdist + topk on the training device), auto (device on CUDA, else trees).
     #[arg(long, value_enum, default_value = "auto")]
     pub refresh: RefreshArg,
     /// Candidate body vertices kept per garment vertex.
-    #[arg(long, default_value_t = D.candidates)]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.candidates)]
     pub candidates: usize,
     /// Learning rate of the blend-weight logits relative to --lr.
-    #[arg(long, default_value_t = D.weights_lr_scale)]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.weights_lr_scale)]
     pub weights_lr_scale: f64,
     /// Initial blend weights: copy the body's within this distance (metres) of it at rest and
     /// interpolate them smoothly over the garment beyond (a skirt's hanging part).
-    #[arg(long, default_value_t = D.inpaint_beyond.unwrap())]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.inpaint_beyond.unwrap())]
     pub inpaint_beyond: f32,
     /// Copy the body's weights by proximity everywhere (no inpainting).
     #[arg(long)]
     pub no_inpaint: bool,
     /// Epochs between validation passes (exact metrics on the held-out poses).
-    #[arg(long, default_value_t = D.validate_every)]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.validate_every)]
     pub validate_every: usize,
 }
 

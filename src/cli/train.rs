@@ -1,6 +1,6 @@
 //! `garmentbake train`: unsupervised PBNS training of a garment on a body and motion clips.
 
-use super::args::{OutputArgs, TrainInputs, D};
+use super::args::{OutputArgs, TrainInputs, TRAIN_DEFAULTS};
 use super::Execute;
 use crate::models::file::EpochRecord;
 use crate::train::pbns::{PhaseSplit, Trainer};
@@ -25,7 +25,7 @@ pub struct Args {
     #[command(flatten)]
     pub inputs: TrainInputs,
     /// Epochs (passes over the training poses).
-    #[arg(long, default_value_t = D.epochs)]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.epochs)]
     pub epochs: usize,
     /// Output model (.safetensors).
     #[arg(long)]
