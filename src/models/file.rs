@@ -158,10 +158,6 @@ impl ModelFile {
         &self.body.skeleton
     }
 
-    pub fn kind(&self) -> ModelKind {
-        self.model.kind()
-    }
-
     /// The PBNS network, or an error saying which kind the file holds instead.
     pub fn pbns(&self) -> Result<&Pbns> {
         match &self.model {
@@ -174,12 +170,6 @@ impl ModelInfo {
     /// The PBNS description, or an error saying which kind the file holds instead.
     pub fn pbns(&self) -> Result<&PbnsInfo> {
         match &self.model {
-            KindInfo::Pbns(p) => Ok(p),
-        }
-    }
-
-    pub fn pbns_mut(&mut self) -> Result<&mut PbnsInfo> {
-        match &mut self.model {
             KindInfo::Pbns(p) => Ok(p),
         }
     }

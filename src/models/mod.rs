@@ -21,22 +21,6 @@ pub enum ModelKind {
     Pbns,
 }
 
-impl Model {
-    pub fn kind(&self) -> ModelKind {
-        match self {
-            Model::Pbns(_) => ModelKind::Pbns,
-        }
-    }
-}
-
-impl std::fmt::Display for ModelKind {
-    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-        f.write_str(match self {
-            ModelKind::Pbns => "PBNS",
-        })
-    }
-}
-
 /// Items (poses, frames) per forward pass when predicting without gradients: bounds memory on
 /// long clips, and the same chunks everywhere keep training, eval and bake bit-identical.
 pub const PREDICT_CHUNK: usize = 64;

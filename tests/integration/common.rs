@@ -179,3 +179,17 @@ pub fn assert_left_untouched(dir: &Path, old: &Path) {
         "a temporary file was left behind: {names:?}"
     );
 }
+
+/// The unit square in the xz plane (y up), split along the diagonal 1-2: the hand-computed
+/// loss and metric tests fold it by lifting vertex 1.
+pub fn unit_square() -> garmentbake::geometry::TriMesh {
+    garmentbake::geometry::TriMesh::new(
+        vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [1.0, 0.0, 1.0],
+        ],
+        vec![[0, 2, 1], [1, 2, 3]],
+    )
+}

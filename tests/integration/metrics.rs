@@ -1,9 +1,9 @@
 //! The evaluation metrics against hand-computed values, and the exact inside-the-body test
 //! (generalised winding number) on the real sample body.
 
-use crate::common::sample;
+use crate::common::{sample, unit_square};
 use garmentbake::body::PosedBody;
-use garmentbake::geometry::{PointIndex, SurfaceIndex, TriMesh};
+use garmentbake::geometry::{PointIndex, SurfaceIndex};
 use garmentbake::io::gltf_body::read_body;
 use garmentbake::metrics::{ClothGeometry, Inside, InsideFrame};
 
@@ -21,15 +21,7 @@ fn one_vertex_body(overlap: bool) -> PosedBody {
 #[test]
 fn cloth_metrics_match_hand_computed_values() {
     // Unit square in the xz plane split along 1-2; vertex 1 lifted by 1 (as in the loss test).
-    let rest = TriMesh::new(
-        vec![
-            [0.0, 0.0, 0.0],
-            [1.0, 0.0, 0.0],
-            [0.0, 0.0, 1.0],
-            [1.0, 0.0, 1.0],
-        ],
-        vec![[0, 2, 1], [1, 2, 3]],
-    );
+    let rest = unit_square();
     let geometry = ClothGeometry::new(&rest, 0.5);
     let x = [
         [0.0, 0.0, 0.0],

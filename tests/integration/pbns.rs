@@ -6,7 +6,6 @@ use garmentbake::bake::{skeleton_asset, skinned_mesh_asset, BODY_COLOR};
 use garmentbake::body::Body;
 use garmentbake::fabric::{Fabric, GRAVITY};
 use garmentbake::garment::Garment;
-use garmentbake::geometry::TriMesh;
 use garmentbake::io::gltf_body::read_body;
 use garmentbake::io::obj::write_obj;
 use garmentbake::models::file::{self, check_skeleton};
@@ -19,7 +18,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::{Mutex, OnceLock};
 
-use crate::common::{run_ok, sample};
+use crate::common::{run_ok, sample, unit_square};
 use tch::{Device, Kind, Tensor};
 
 fn body() -> &'static Body {
@@ -90,15 +89,7 @@ fn scalar(t: &Tensor) -> f64 {
 fn loss_terms_match_hand_computed_values() {
     let _g = serial();
     // Unit square in the xz plane (y up), split along the diagonal 1-2; vertex 3 pinned.
-    let rest = TriMesh::new(
-        vec![
-            [0.0, 0.0, 0.0],
-            [1.0, 0.0, 0.0],
-            [0.0, 0.0, 1.0],
-            [1.0, 0.0, 1.0],
-        ],
-        vec![[0, 2, 1], [1, 2, 3]],
-    );
+    let rest = unit_square();
     let mut fabric = Fabric::load("cotton").unwrap();
     fabric.density = 0.5;
     let cloth = Cloth::new(&rest, &fabric, &[3], Device::Cpu).unwrap();
