@@ -17,7 +17,7 @@ LAYERS = [
     "motion garment",
     "metrics",
     "models",
-    "train eval",
+    "train eval simulate",
     "bake",
     "cli",
 ]

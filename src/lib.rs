@@ -11,7 +11,7 @@
 //! 5. `motion`, `garment` — clips loaded onto a skeleton; garments and their fitting
 //! 6. `metrics` — garment metrics of posed frames
 //! 7. `models` — the networks and the model file
-//! 8. `train`, `eval` — training; evaluation over clips
+//! 8. `train`, `eval`, `simulate` — training; evaluation over clips; cloth-simulated ground truth
 //! 9. `bake` — model output → the exporter-neutral baked asset (`exporters::asset`)
 //! 10. `cli` — one command per pipeline step
 
@@ -30,4 +30,5 @@ pub mod motion;
 pub mod preview;
 pub mod progress;
 pub mod rig;
+pub mod simulate;
 pub mod train;

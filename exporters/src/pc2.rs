@@ -34,6 +34,13 @@ pub enum Pc2Error {
 /// Writes `cache` atomically, one sample per frame starting at frame 0 (PC2 has no rate; the
 /// cache's fps is the scene's).
 pub fn write(path: &Path, cache: &PointCache) -> Result<(), Pc2Error> {
+    let bytes = to_bytes(cache)?;
+    write_atomic_with(path, |w| w.write_all(&bytes))?;
+    Ok(())
+}
+
+/// The file's bytes: header, then every frame's points.
+pub fn to_bytes(cache: &PointCache) -> Result<Vec<u8>, Pc2Error> {
     cache.check().map_err(Pc2Error::Invalid)?;
     let header = Header {
         version: 1,
@@ -42,14 +49,12 @@ pub fn write(path: &Path, cache: &PointCache) -> Result<(), Pc2Error> {
         sample_rate: 1.0,
         samples: cache.frame_count(),
     };
-    write_atomic_with(path, |w| {
-        w.write_all(&header_bytes(&header))?;
-        for c in cache.points.iter().flatten() {
-            w.write_all(&c.to_le_bytes())?;
-        }
-        Ok(())
-    })?;
-    Ok(())
+    let mut bytes = Vec::with_capacity(HEADER_LEN + 12 * cache.points.len());
+    bytes.extend_from_slice(&header_bytes(&header));
+    for c in cache.points.iter().flatten() {
+        bytes.extend_from_slice(&c.to_le_bytes());
+    }
+    Ok(bytes)
 }
 
 fn header_bytes(h: &Header) -> [u8; HEADER_LEN] {

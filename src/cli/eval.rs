@@ -7,9 +7,10 @@ use crate::io::gltf_body::read_body;
 use crate::metrics::{body_edges_under, ClothGeometry, Inside, Metrics};
 use crate::models::file::check_skeleton;
 use crate::motion::{load_clip, read_maps};
-use anyhow::{Context, Result};
+use anyhow::Result;
 use serde::Serialize;
-use std::path::{Path, PathBuf};
+use super::simulate::write_cache;
+use std::path::PathBuf;
 
 /// Evaluate a trained model on a motion clip: write the garment's world-space vertices for every
 /// frame as a point cache (PC2: Blender's Mesh Cache modifier on the garment OBJ, which has the
@@ -240,25 +241,4 @@ fn row(name: &str, m: &Metrics) -> String {
         "{name:<12} {:>10.3} {:>10.4} {:>13.2} {:>22.2} {:>12.4}",
         m.edge_mm, m.bend, m.collided_pct, m.collided_overlap_pct, m.gravity_j
     )
-}
-
-/// A per-frame point cache of `mesh`'s vertices, in the format the extension names.
-fn write_cache(
-    path: &Path,
-    mesh: &crate::geometry::TriMesh,
-    frames: &[Vec<[f32; 3]>],
-    fps: f32,
-) -> Result<()> {
-    let cache = exporters::PointCache {
-        name: path
-            .file_stem()
-            .map_or("cache".into(), |s| s.to_string_lossy().into_owned()),
-        fps,
-        triangles: mesh.triangles.clone(),
-        uvs: None,
-        point_count: mesh.vertex_count(),
-        points: frames.iter().flatten().copied().collect(),
-    };
-    exporters::write_point_cache(&cache, path)
-        .with_context(|| format!("writing {}", path.display()))
 }

@@ -7,6 +7,7 @@ pub mod eval;
 pub mod inspect;
 pub mod pose;
 pub mod preview;
+pub mod simulate;
 pub mod train;
 
 use anyhow::Result;
@@ -65,6 +66,7 @@ enum Command {
     Train(train::Args),
     Eval(eval::Args),
     Bake(bake::Args),
+    Simulate(simulate::Args),
     Bench(bench::Args),
 }
 
@@ -78,6 +80,7 @@ pub fn main() -> i32 {
         Command::Train(a) => run(&a, a.output.json),
         Command::Eval(a) => run(&a, a.output.json),
         Command::Bake(a) => run(&a, a.output.json),
+        Command::Simulate(a) => run(&a, a.output.json),
         Command::Bench(a) => run(&a, a.json()),
     };
     match result {

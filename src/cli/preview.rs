@@ -36,6 +36,13 @@ pub struct Args {
     /// Garment mesh(es) drawn at rest, OBJ or USD (only without --motion).
     #[arg(long = "garment")]
     pub garments: Vec<PathBuf>,
+    /// With --motion: one point cache per --garment (.pc2, one sample per clip frame, e.g. from
+    /// `simulate` or `eval`) that poses it.
+    #[arg(long = "cache")]
+    pub caches: Vec<PathBuf>,
+    /// Resample the clip to this rate (the rate the caches were written at).
+    #[arg(long)]
+    pub fps: Option<f32>,
     /// Trained PBNS model (.safetensors): draw its garment posed by the clip.
     #[arg(long)]
     pub model: Option<PathBuf>,
@@ -141,12 +148,12 @@ fn render(args: &Args) -> Result<Report> {
         .iter()
         .map(|p| Garment::read(p))
         .collect::<Result<Vec<_>>>()?;
-    let poses: Vec<(String, Vec<JointTransform>)> = match &args.motion {
+    let poses: Vec<(String, Vec<JointTransform>, usize)> = match &args.motion {
         Some(path) => {
-            if !args.garments.is_empty() {
-                bail!("--garment is drawn at rest only; drop --motion (posing garments needs a trained model: --model)");
+            if garments.len() != args.caches.len() {
+                bail!("with --motion each --garment needs its --cache (a point cache from simulate or eval), or a trained model: --model");
             }
-            let clip = load_clip(path, &read_maps(&args.maps)?, &body.skeleton, None)?;
+            let clip = load_clip(path, &read_maps(&args.maps)?, &body.skeleton, args.fps)?;
             let frames = pick_frames(clip.animation.frame_count(), args.frames, &args.frame_list)?;
             frames
                 .iter()
@@ -154,12 +161,20 @@ fn render(args: &Args) -> Result<Report> {
                     (
                         frame_label(&clip.animation, f),
                         clip.animation.local_pose(f),
+                        f,
                     )
                 })
                 .collect()
         }
-        None => vec![("rest".to_string(), body.skeleton.rest.clone())],
+        None if !args.caches.is_empty() => bail!("--cache plays a garment over a clip: add --motion"),
+        None => vec![("rest".to_string(), body.skeleton.rest.clone(), 0)],
     };
+    let caches = args
+        .caches
+        .iter()
+        .zip(&garments)
+        .map(|(p, g)| cache_frames(p, g, poses.iter().map(|p| p.2).max().unwrap_or(0)))
+        .collect::<Result<Vec<_>>>()?;
     let mut triangles: Vec<&[[u32; 3]]> = garments
         .iter()
         .map(|g| g.mesh.triangles.as_slice())
@@ -168,13 +183,16 @@ fn render(args: &Args) -> Result<Report> {
         triangles.push(&m.garment.triangles);
     }
     let mut shots = Vec::new();
-    for (label, pose) in &poses {
+    for (label, pose, frame) in &poses {
         let skinning = body.skeleton.skinning_matrices(pose);
         let body_points = body.skin.skin_points(&body.mesh.positions, &skinning);
         let mut drawn: Vec<(Vec<[f32; 3]>, usize)> = garments
             .iter()
             .enumerate()
-            .map(|(i, g)| (g.mesh.positions.clone(), i))
+            .map(|(i, g)| match caches.get(i) {
+                Some(c) => (c[*frame].clone(), i),
+                None => (g.mesh.positions.clone(), i),
+            })
             .collect();
         let Some(m) = &model else {
             shots.push(Shot {
@@ -271,4 +289,17 @@ pub(crate) fn pick_frames(total: usize, count: usize, list: &[usize]) -> Result<
             }
         })
         .collect())
+}
+
+/// A garment's cache, long enough to show frame `last`.
+fn cache_frames(path: &std::path::Path, garment: &Garment, last: usize) -> Result<Vec<Vec<[f32; 3]>>> {
+    let frames = crate::io::point_cache::read_pc2(path, garment.mesh.vertex_count())?;
+    if frames.len() <= last {
+        bail!(
+            "{}: {} frames, frame {last} asked for (was it written at another --fps?)",
+            path.display(),
+            frames.len()
+        );
+    }
+    Ok(frames)
 }

@@ -5,4 +5,5 @@ pub mod gltf_body;
 pub mod joint_map;
 pub mod makehuman;
 pub mod obj;
+pub mod point_cache;
 pub mod usd_mesh;
