@@ -93,7 +93,8 @@ pub fn prepare(scene: &Scene, settings: &Settings) -> Result<Prepared> {
     })
 }
 
-/// Proximity weights from the body (4 influences): what the pinned vertices follow.
+/// The nearest body vertex's weights (4 influences): the pinned vertices move rigidly with the
+/// skin vertex under them. Only pinned vertices read these targets after the first frame.
 fn garment_lbs(body: &Body, garment: &Garment) -> Result<Skin> {
     let index = PointIndex::new(&body.mesh.positions)?;
     let (skin, _) = weights::garment_skin(
@@ -101,7 +102,7 @@ fn garment_lbs(body: &Body, garment: &Garment) -> Result<Skin> {
         &body.skin,
         body.skeleton.joint_count(),
         &index,
-        8,
+        1,
         4,
         None,
     );

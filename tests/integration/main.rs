@@ -10,3 +10,4 @@ mod pbns;
 mod pose;
 mod retarget;
 mod usd;
+mod simulate;
