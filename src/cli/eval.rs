@@ -1,6 +1,7 @@
 //! `garmentbake eval`: a trained model over a clip → point cache + PBNS metrics.
 
 use super::args::{ClipArgs, ComputeArgs, OutputArgs};
+use super::simulate::write_cache;
 use super::Execute;
 use crate::eval::{compare, lbs_frames, model_frames};
 use crate::io::gltf_body::read_body;
@@ -9,7 +10,6 @@ use crate::models::file::check_skeleton;
 use crate::motion::{load_clip, read_maps};
 use anyhow::Result;
 use serde::Serialize;
-use super::simulate::write_cache;
 use std::path::PathBuf;
 
 /// Evaluate a trained model on a motion clip: write the garment's world-space vertices for every

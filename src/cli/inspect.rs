@@ -4,6 +4,7 @@ use super::Execute;
 use crate::geometry::topology::Topology;
 use crate::io::bvh::Bvh;
 use crate::io::obj::read_obj;
+use crate::models::file::KindInfo;
 use anyhow::{bail, Context, Result};
 use exporters::FileKind;
 use serde_json::{json, Value};
@@ -117,24 +118,41 @@ fn model_report(path: &Path, full: bool) -> Result<Value> {
     }
     let names = &info.skeleton.joint_names;
     let g = &info.garment;
-    let p = info.pbns()?;
-    let last = p.history.last();
+    let (model, training, history) = match &info.model {
+        KindInfo::Pbns(p) => (
+            json!({
+                "kind": info.model.kind(),
+                "mlp": format!("{} inputs → {} × {} ReLU → {} PSD blend shapes", p.shape.features, p.shape.layers, p.shape.width, p.shape.width),
+                "influences": p.shape.influences,
+                "feature_joints": p.feature_joints.iter().map(|&j| names[j].clone()).collect::<Vec<_>>(),
+            }),
+            json!(p.training),
+            json!({ "epochs": p.history.len(), "last": p.history.last() }),
+        ),
+        KindInfo::Dynamic(d) => (
+            json!({
+                "kind": info.model.kind(),
+                "stages": d.training.stages,
+                "space": format!("{}² UV map, {} seeds → latent {} → ξ {} ch → R {} × {}", d.shape.map, d.shape.seeds, d.shape.latent, d.shape.xi, d.shape.mlp_layers, d.shape.mlp),
+                "preset": d.shape.preset,
+                "fps": d.fps,
+                "kernel_radius_mm": d.parts.iter().zip(&d.radii).map(|(p, r)| format!("{p} {:.1}", r * 1e3)).collect::<Vec<_>>(),
+            }),
+            json!(d.training),
+            json!({ "epochs": d.history.len(), "last": d.history.last() }),
+        ),
+    };
     Ok(json!({
         "file": path.display().to_string(),
         "format": format!("{} v{}", info.format, info.version),
-        "model": {
-            "kind": info.model.kind(),
-            "mlp": format!("{} inputs → {} × {} ReLU → {} PSD blend shapes", p.shape.features, p.shape.layers, p.shape.width, p.shape.width),
-            "influences": p.shape.influences,
-            "feature_joints": p.feature_joints.iter().map(|&j| names[j].clone()).collect::<Vec<_>>(),
-        },
+        "model": model,
         "skeleton": { "joints": names.len(), "names": names },
         "garment": { "name": g.name, "vertices": g.vertices, "faces": g.faces.len(), "uvs": g.uv.is_some(),
                      "pinned": g.pinned.len(), "rest_hash": g.rest_hash },
         "body": { "name": info.body.name, "vertices": info.body.vertices, "rest_hash": info.body.rest_hash },
         "fabric": info.fabric,
-        "training": p.training,
-        "history": { "epochs": p.history.len(), "last": last },
+        "training": training,
+        "history": history,
         "tensors": tensors,
     }))
 }

@@ -9,6 +9,7 @@ pub mod pose;
 pub mod preview;
 pub mod simulate;
 pub mod train;
+pub mod train_dynamic;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -67,6 +68,7 @@ enum Command {
     Eval(eval::Args),
     Bake(bake::Args),
     Simulate(simulate::Args),
+    TrainDynamic(train_dynamic::Args),
     Bench(bench::Args),
 }
 
@@ -81,6 +83,7 @@ pub fn main() -> i32 {
         Command::Eval(a) => run(&a, a.output.json),
         Command::Bake(a) => run(&a, a.output.json),
         Command::Simulate(a) => run(&a, a.output.json),
+        Command::TrainDynamic(a) => run(&a, a.output.json),
         Command::Bench(a) => run(&a, a.json()),
     };
     match result {

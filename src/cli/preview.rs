@@ -166,7 +166,9 @@ fn render(args: &Args) -> Result<Report> {
                 })
                 .collect()
         }
-        None if !args.caches.is_empty() => bail!("--cache plays a garment over a clip: add --motion"),
+        None if !args.caches.is_empty() => {
+            bail!("--cache plays a garment over a clip: add --motion")
+        }
         None => vec![("rest".to_string(), body.skeleton.rest.clone(), 0)],
     };
     let caches = args
@@ -292,7 +294,11 @@ pub(crate) fn pick_frames(total: usize, count: usize, list: &[usize]) -> Result<
 }
 
 /// A garment's cache, long enough to show frame `last`.
-fn cache_frames(path: &std::path::Path, garment: &Garment, last: usize) -> Result<Vec<Vec<[f32; 3]>>> {
+fn cache_frames(
+    path: &std::path::Path,
+    garment: &Garment,
+    last: usize,
+) -> Result<Vec<Vec<[f32; 3]>>> {
     let frames = crate::io::point_cache::read_pc2(path, garment.mesh.vertex_count())?;
     if frames.len() <= last {
         bail!(

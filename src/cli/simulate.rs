@@ -122,7 +122,12 @@ impl Execute for Args {
         let quiet = self.output.json;
         exporters::FileKind::written(&self.out)
             .filter(|k| matches!(k, exporters::FileKind::Pc2 | exporters::FileKind::Usd))
-            .with_context(|| format!("--out {}: write a .pc2 or .usda/.usdc/.usdz point cache", self.out.display()))?;
+            .with_context(|| {
+                format!(
+                    "--out {}: write a .pc2 or .usda/.usdc/.usdz point cache",
+                    self.out.display()
+                )
+            })?;
         let body = read_body(&self.body)?;
         let garment = Garment::read(&self.garment)?;
         if let Some(p) = garment.fit_problems(&body)?.first() {
@@ -130,12 +135,25 @@ impl Execute for Args {
         }
         let fabric = Fabric::load(&self.config)?;
         let motion = self.clips.single()?;
-        let clip = load_clip(motion, &read_maps(&self.clips.maps)?, &body.skeleton, self.clips.fps)?;
+        let clip = load_clip(
+            motion,
+            &read_maps(&self.clips.maps)?,
+            &body.skeleton,
+            self.clips.fps,
+        )?;
         let mut settings = self.settings()?;
         settings.blender = simulate::blender::find(self.blender.as_deref())?;
-        let scene = Scene { body: &body, garment: &garment, fabric: &fabric, clip: &clip.animation };
+        let scene = Scene {
+            body: &body,
+            garment: &garment,
+            fabric: &fabric,
+            clip: &clip.animation,
+        };
         if simulate::blender::pinned(&scene).is_empty() {
-            say(&format!("warning: {} has no pinned vertices: nothing holds it to the body but collisions", self.garment.display()));
+            say(&format!(
+                "warning: {} has no pinned vertices: nothing holds it to the body but collisions",
+                self.garment.display()
+            ));
         }
         let bar = crate::progress::bar(0, "simulate", quiet);
         let cache_dir = (!self.no_cache).then_some(self.cache.as_path());
@@ -174,12 +192,25 @@ impl Execute for Args {
         let s = &r.summary;
         println!(
             "{}: {} frames at {} fps, {} garment vertices ({} pinned), fabric {}, Blender {}",
-            r.motion.display(), r.frames, r.fps, r.garment_vertices, r.pinned, r.fabric, r.blender_version
+            r.motion.display(),
+            r.frames,
+            r.fps,
+            r.garment_vertices,
+            r.pinned,
+            r.fabric,
+            r.blender_version
         );
-        let how = if r.cached { "read from the cache" } else { "simulated" };
+        let how = if r.cached {
+            "read from the cache"
+        } else {
+            "simulated"
+        };
         println!(
             "{how}: {:.3} s/frame over {} lead-in + {} clip frames (key {})",
-            r.seconds_per_frame, r.lead_in_frames, r.frames, &r.cache_key[..12]
+            r.seconds_per_frame,
+            r.lead_in_frames,
+            r.frames,
+            &r.cache_key[..12]
         );
         println!(
             "inside the body (winding number): {:.3} % of vertices on average, worst frame {} ({} vertices), depth p99 {:.1} mm, max {:.1} mm",
@@ -197,14 +228,22 @@ impl Execute for Args {
 }
 
 /// A per-frame point cache of `mesh`'s vertices, in the format the extension names.
-pub fn write_cache(path: &Path, mesh: &crate::geometry::TriMesh, frames: &[Vec<[f32; 3]>], fps: f32) -> Result<()> {
+pub fn write_cache(
+    path: &Path,
+    mesh: &crate::geometry::TriMesh,
+    frames: &[Vec<[f32; 3]>],
+    fps: f32,
+) -> Result<()> {
     let cache = exporters::PointCache {
-        name: path.file_stem().map_or("cache".into(), |s| s.to_string_lossy().into_owned()),
+        name: path
+            .file_stem()
+            .map_or("cache".into(), |s| s.to_string_lossy().into_owned()),
         fps,
         triangles: mesh.triangles.clone(),
         uvs: None,
         point_count: mesh.vertex_count(),
         points: frames.iter().flatten().copied().collect(),
     };
-    exporters::write_point_cache(&cache, path).with_context(|| format!("writing {}", path.display()))
+    exporters::write_point_cache(&cache, path)
+        .with_context(|| format!("writing {}", path.display()))
 }

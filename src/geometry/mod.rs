@@ -10,6 +10,7 @@ pub mod laplacian;
 pub mod mesh;
 pub mod nearest;
 pub mod normals;
+pub mod sdf_grid;
 pub mod topology;
 pub mod winding;
 

@@ -19,7 +19,10 @@ pub fn read_pc2(path: &Path, vertices: usize) -> Result<Vec<Vec<[f32; 3]>>> {
     if frames.is_empty() {
         bail!("{}: no frames", path.display());
     }
-    if let Some(f) = frames.iter().position(|x| x.iter().flatten().any(|c| !c.is_finite())) {
+    if let Some(f) = frames
+        .iter()
+        .position(|x| x.iter().flatten().any(|c| !c.is_finite()))
+    {
         bail!("{}: frame {f} has non-finite points", path.display());
     }
     Ok(frames)

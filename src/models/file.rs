@@ -9,6 +9,8 @@
 //! `HashMap` with several would serialise in random order) and the JSON has sorted keys and no
 //! timestamps or absolute paths. Checkpoints are the same format plus the Adam state.
 
+use super::dynamic::space::Consts;
+use super::dynamic::{Seeds, Space, SpaceShape, UvRaster};
 use super::pbns::{flat, Pbns, PbnsShape};
 use super::{Model, ModelKind};
 use crate::body::Body;
@@ -48,14 +50,71 @@ pub struct ModelInfo {
 #[serde(tag = "kind", rename_all = "lowercase")]
 pub enum KindInfo {
     Pbns(PbnsInfo),
+    Dynamic(DynamicInfo),
 }
 
 impl KindInfo {
     pub fn kind(&self) -> ModelKind {
         match self {
             KindInfo::Pbns(_) => ModelKind::Pbns,
+            KindInfo::Dynamic(_) => ModelKind::Dynamic,
         }
     }
+}
+
+/// A dynamic model's sizes, seeds, training and history (stage 1: the generative space).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DynamicInfo {
+    pub shape: SpaceShape,
+    /// Body vertices used as seed points, and each one's part (index into `parts`).
+    pub seeds: Vec<u32>,
+    pub seed_parts: Vec<usize>,
+    pub parts: Vec<String>,
+    /// Learnt kernel radius per part (metres), for reading; the tensor is authoritative.
+    pub radii: Vec<f64>,
+    /// The frame rate of the simulations it learnt from.
+    pub fps: f32,
+    pub training: DynamicTraining,
+    pub history: Vec<DynamicEpoch>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DynamicTraining {
+    /// The stages trained so far ("space").
+    pub stages: Vec<String>,
+    pub seed: u64,
+    pub epochs: usize,
+    pub batch: usize,
+    pub learning_rate: f64,
+    /// Clip file names and their frame counts.
+    pub motions: Vec<String>,
+    pub frames: usize,
+}
+
+/// The generative space's loss terms, weighted (mean over an epoch's steps).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct SpaceTerms {
+    pub positions: f64,
+    pub laplacian: f64,
+    pub random_edges: f64,
+    pub sdf: f64,
+    pub latent: f64,
+}
+
+impl SpaceTerms {
+    pub fn total(&self) -> f64 {
+        self.positions + self.laplacian + self.random_edges + self.sdf + self.latent
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DynamicEpoch {
+    pub epoch: usize,
+    pub loss: f64,
+    pub terms: SpaceTerms,
+    pub learning_rate: f64,
+    /// Mean vertex distance (mm) of the reconstructions of the epoch's training frames.
+    pub train_mean_mm: f64,
 }
 
 /// A PBNS model's sizes, inputs, training settings and metric history.
@@ -66,6 +125,33 @@ pub struct PbnsInfo {
     pub feature_joints: Vec<usize>,
     pub training: TrainingInfo,
     pub history: Vec<EpochRecord>,
+}
+
+impl GarmentInfo {
+    pub fn of(garment: &crate::garment::Garment, pinned: &[u32]) -> GarmentInfo {
+        let rest = &garment.mesh.positions;
+        GarmentInfo {
+            name: garment.name.clone(),
+            vertices: rest.len(),
+            faces: garment.mesh.triangles.clone(),
+            uv: garment.mesh.uv.as_ref().map(|uv| UvInfo {
+                coords: uv.coords.clone(),
+                triangles: uv.triangles.clone(),
+            }),
+            pinned: pinned.to_vec(),
+            rest_hash: points_hash(rest),
+        }
+    }
+}
+
+impl BodyInfo {
+    pub fn of(body: &Body) -> BodyInfo {
+        BodyInfo {
+            name: body.name.clone(),
+            vertices: body.mesh.vertex_count(),
+            rest_hash: points_hash(&body.mesh.positions),
+        }
+    }
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -162,6 +248,15 @@ impl ModelFile {
     pub fn pbns(&self) -> Result<&Pbns> {
         match &self.model {
             Model::Pbns(m) => Ok(m),
+            Model::Dynamic(_) => Err(not_kind("PBNS", "dynamic")),
+        }
+    }
+
+    /// The dynamic model's generative space, or an error saying which kind the file holds.
+    pub fn dynamic(&self) -> Result<&Space> {
+        match &self.model {
+            Model::Dynamic(m) => Ok(m),
+            Model::Pbns(_) => Err(not_kind("dynamic", "PBNS")),
         }
     }
 }
@@ -171,8 +266,20 @@ impl ModelInfo {
     pub fn pbns(&self) -> Result<&PbnsInfo> {
         match &self.model {
             KindInfo::Pbns(p) => Ok(p),
+            KindInfo::Dynamic(_) => Err(not_kind("PBNS", "dynamic")),
         }
     }
+
+    pub fn dynamic(&self) -> Result<&DynamicInfo> {
+        match &self.model {
+            KindInfo::Dynamic(d) => Ok(d),
+            KindInfo::Pbns(_) => Err(not_kind("dynamic", "PBNS")),
+        }
+    }
+}
+
+fn not_kind(wanted: &str, found: &str) -> anyhow::Error {
+    anyhow::anyhow!("this is a {found} model; the command needs a {wanted} model (garmentbake inspect shows a file's kind)")
 }
 
 /// Writes `file` atomically (with `extra` tensors, e.g. optimizer state).
@@ -185,6 +292,11 @@ pub fn save(path: &Path, file: &ModelFile) -> Result<()> {
 pub fn to_bytes(file: &ModelFile) -> Result<Vec<u8>> {
     let mut blobs: Vec<(String, Blob)> = match &file.model {
         Model::Pbns(m) => pbns_blobs(m),
+        Model::Dynamic(m) => m
+            .parameters()
+            .into_iter()
+            .map(|(name, t)| (format!("space.{name}"), Blob::float(&t)))
+            .collect(),
     };
     blobs.push(("garment.rest".into(), Blob::points(&file.garment.positions)));
     let k = file.lbs.influences;
@@ -289,9 +401,6 @@ pub fn load(path: &Path, device: Device) -> Result<ModelFile> {
         device,
     };
     let info = info_of(path, &bytes)?;
-    let (model, known): (Model, fn(&str) -> bool) = match &info.model {
-        KindInfo::Pbns(p) => (Model::Pbns(load_pbns(&tensors, p)?), is_pbns_tensor),
-    };
     let lbs = skin_of(&tensors.view("lbs.joints")?, &tensors.view("lbs.weights")?)?;
     let skeleton = Skeleton::from_plain(&info.skeleton).map_err(|e| tensors.fail(e.to_string()))?;
     let body = Body {
@@ -321,6 +430,13 @@ pub fn load(path: &Path, device: Device) -> Result<ModelFile> {
     body.mesh
         .validate()
         .map_err(|e| tensors.fail(format!("body: {e}")))?;
+    let (model, known): (Model, fn(&str) -> bool) = match &info.model {
+        KindInfo::Pbns(p) => (Model::Pbns(load_pbns(&tensors, p)?), is_pbns_tensor),
+        KindInfo::Dynamic(d) => (
+            Model::Dynamic(Box::new(load_space(&tensors, d, &garment, &body)?)),
+            |n: &str| n.starts_with("space."),
+        ),
+    };
     let common = |name: &str| {
         name.starts_with("lbs.") || name.starts_with("body.") || name == "garment.rest"
     };
@@ -343,6 +459,29 @@ pub fn load(path: &Path, device: Device) -> Result<ModelFile> {
 
 fn is_pbns_tensor(name: &str) -> bool {
     name.starts_with("mlp.") || name.starts_with("W.") || name == "psd"
+}
+
+/// The generative space from its tensors: the network rebuilt from the description (seeds,
+/// UV layout), then its parameters loaded.
+fn load_space(t: &Tensors, info: &DynamicInfo, garment: &TriMesh, body: &Body) -> Result<Space> {
+    let seeds = Seeds::from_vertices(body, &info.seeds, &info.seed_parts)
+        .map_err(|e| t.fail(e.to_string()))?;
+    let raster = UvRaster::new(garment, info.shape.map, &t.path.display().to_string())?;
+    let consts = Consts::new(garment, &raster, &seeds, t.device);
+    let mut space = Space::new(info.shape.clone(), consts, t.device)?;
+    let stored: Vec<(String, Tensor)> =
+        t.st.names()
+            .into_iter()
+            .filter_map(|n| {
+                n.strip_prefix("space.")
+                    .map(|s| (s.to_string(), n.to_string()))
+            })
+            .map(|(short, full)| Ok((short, t.get(&full)?)))
+            .collect::<Result<_>>()?;
+    space
+        .load_parameters(&stored)
+        .map_err(|e| t.fail(e.to_string()))?;
+    Ok(space)
 }
 
 /// The PBNS network from its tensors, checked against its description.

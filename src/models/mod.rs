@@ -1,6 +1,7 @@
 //! Neural garment models (PBNS now; the dynamic model next), their inputs and the one model file
 //! that holds any of them, its kind named in the metadata.
 
+pub mod dynamic;
 pub mod file;
 pub mod pbns;
 pub mod pose_features;
@@ -12,6 +13,7 @@ use tch::Tensor;
 /// A trained garment model, of the kind its file's metadata names.
 pub enum Model {
     Pbns(Pbns),
+    Dynamic(Box<dynamic::Space>),
 }
 
 /// The model kinds a file can hold (the metadata's `model.kind`).
@@ -19,6 +21,7 @@ pub enum Model {
 #[serde(rename_all = "lowercase")]
 pub enum ModelKind {
     Pbns,
+    Dynamic,
 }
 
 /// Items (poses, frames) per forward pass when predicting without gradients: bounds memory on

@@ -81,7 +81,13 @@ pub type JobFiles = Vec<(&'static str, Vec<u8>)>;
 /// Script, meshes, per-frame points and job.json for one simulation.
 pub fn job_files(scene: &Scene, prepared: &Prepared, settings: &Settings) -> Result<JobFiles> {
     let mut files: JobFiles = vec![("cloth.py", SCRIPT.as_bytes().to_vec())];
-    let body = mesh_files(&mut files, Role::Body, &scene.body.mesh, &prepared.body_frames, prepared.fps)?;
+    let body = mesh_files(
+        &mut files,
+        Role::Body,
+        &scene.body.mesh,
+        &prepared.body_frames,
+        prepared.fps,
+    )?;
     let garment = mesh_files(
         &mut files,
         Role::Garment,
@@ -136,10 +142,23 @@ fn mesh_files(
 ) -> Result<MeshFiles> {
     let (name, points, triangles, cache) = match role {
         Role::Body => ("body", "body_points.f32", "body_triangles.u32", "body.pc2"),
-        Role::Garment => ("garment", "garment_points.f32", "garment_triangles.u32", "garment.pc2"),
+        Role::Garment => (
+            "garment",
+            "garment_points.f32",
+            "garment_triangles.u32",
+            "garment.pc2",
+        ),
     };
-    let floats = mesh.positions.iter().flatten().flat_map(|c| c.to_le_bytes());
-    let ints = mesh.triangles.iter().flatten().flat_map(|i| i.to_le_bytes());
+    let floats = mesh
+        .positions
+        .iter()
+        .flatten()
+        .flat_map(|c| c.to_le_bytes());
+    let ints = mesh
+        .triangles
+        .iter()
+        .flatten()
+        .flat_map(|i| i.to_le_bytes());
     let pc = exporters::PointCache {
         name: name.into(),
         fps,
@@ -150,7 +169,10 @@ fn mesh_files(
     };
     files.push((points, floats.collect()));
     files.push((triangles, ints.collect()));
-    files.push((cache, exporters::pc2::to_bytes(&pc).map_err(|e| anyhow::anyhow!("{e}"))?));
+    files.push((
+        cache,
+        exporters::pc2::to_bytes(&pc).map_err(|e| anyhow::anyhow!("{e}"))?,
+    ));
     Ok(MeshFiles {
         vertices: mesh.vertex_count(),
         points,
@@ -160,7 +182,13 @@ fn mesh_files(
 }
 
 /// Runs Blender on the job in `dir`; `on_frame(k)` after each of the k simulated frames.
-pub fn run(dir: &Path, settings: &Settings, vertices: usize, lead_in: usize, on_frame: &dyn Fn(usize)) -> Result<Simulation> {
+pub fn run(
+    dir: &Path,
+    settings: &Settings,
+    vertices: usize,
+    lead_in: usize,
+    on_frame: &dyn Fn(usize),
+) -> Result<Simulation> {
     let mut child = Command::new(&settings.blender)
         .args(["-b", "--factory-startup", "-noaudio", "-t"])
         .arg(settings.threads.to_string())
@@ -180,7 +208,10 @@ pub fn run(dir: &Path, settings: &Settings, vertices: usize, lead_in: usize, on_
         text
     });
     for line in BufReader::new(child.stdout.take().expect("piped")).lines() {
-        if let Some(k) = line?.strip_prefix("frame ").and_then(|k| k.trim().parse::<usize>().ok()) {
+        if let Some(k) = line?
+            .strip_prefix("frame ")
+            .and_then(|k| k.trim().parse::<usize>().ok())
+        {
             on_frame(k + 1);
         }
     }
@@ -242,7 +273,8 @@ impl WorkDir {
         let nanos = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(0, |d| d.as_nanos());
-        let dir = std::env::temp_dir().join(format!("garmentbake-sim-{}-{nanos}", std::process::id()));
+        let dir =
+            std::env::temp_dir().join(format!("garmentbake-sim-{}-{nanos}", std::process::id()));
         std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
         Ok(WorkDir(dir))
     }

@@ -37,7 +37,10 @@ pub fn key(files: &super::blender::JobFiles) -> String {
 }
 
 fn paths(dir: &Path, key: &str) -> (PathBuf, PathBuf) {
-    (dir.join(format!("{key}.pc2")), dir.join(format!("{key}.json")))
+    (
+        dir.join(format!("{key}.pc2")),
+        dir.join(format!("{key}.json")),
+    )
 }
 
 /// The stored simulation, when both its files are there and whole.

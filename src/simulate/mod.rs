@@ -63,7 +63,10 @@ pub struct Prepared {
 /// Poses the body and the garment's LBS over lead-in + clip.
 pub fn prepare(scene: &Scene, settings: &Settings) -> Result<Prepared> {
     let clip = scene.clip;
-    let count = settings.frames.unwrap_or(usize::MAX).min(clip.frame_count());
+    let count = settings
+        .frames
+        .unwrap_or(usize::MAX)
+        .min(clip.frame_count());
     if count == 0 {
         bail!("nothing to simulate: the clip has no frames");
     }
@@ -145,7 +148,13 @@ pub fn run(
     let lead = prepared.lead_in;
     let clip_body = prepared.body_frames[lead..].to_vec();
     if let Some((garment, entry)) = cache_dir.and_then(|d| cache::load(d, &key, n)) {
-        return Ok(Outcome { garment, body: clip_body, entry, key, cached: true });
+        return Ok(Outcome {
+            garment,
+            body: clip_body,
+            entry,
+            key,
+            cached: true,
+        });
     }
     let total = prepared.poses.len();
     let work = blender::WorkDir::new()?;
@@ -153,7 +162,10 @@ pub fn run(
     drop(files);
     let sim = blender::run(&work.0, settings, n, lead, &|k| on_frame(k, total))?;
     if sim.simulated_frames != total {
-        bail!("Blender simulated {} of {total} frames", sim.simulated_frames);
+        bail!(
+            "Blender simulated {} of {total} frames",
+            sim.simulated_frames
+        );
     }
     stats::check(&sim.garment, prepared.fps, settings.speed_limit, lead)?;
     let series = stats::Series {
@@ -182,5 +194,11 @@ pub fn run(
     if let Some(dir) = cache_dir {
         cache::store(dir, &key, &garment, prepared.fps, &entry)?;
     }
-    Ok(Outcome { garment, body: clip_body, entry, key, cached: false })
+    Ok(Outcome {
+        garment,
+        body: clip_body,
+        entry,
+        key,
+        cached: false,
+    })
 }

@@ -60,29 +60,42 @@ pub fn of(
             let posed = PosedBody::new(s.body, &poses[f]);
             let surface = SurfaceIndex::new(&posed.points, &s.body.mesh.triangles);
             let inside = InsideFrame::of(x, &posed, &surface);
-            let before = if f == 0 { previous } else { Some(&frames[f - 1][..]) };
+            let before = if f == 0 {
+                previous
+            } else {
+                Some(&frames[f - 1][..])
+            };
             let stats = FrameStats {
                 frame: f,
                 inside_vertices: inside.depths.len(),
                 inside_pct: 100.0 * inside.depths.len() as f64 / x.len().max(1) as f64,
                 strain_pct: edges.mean_strain_pct(x),
                 max_speed: before.map_or(0.0, |b| max_step(b, x) * s.fps as f64),
-                pinned_error_mm: 1e3 * s.pinned.iter().map(|&v| distance(x[v as usize], targets[f][v as usize])).fold(0.0, f64::max),
+                pinned_error_mm: 1e3
+                    * s.pinned
+                        .iter()
+                        .map(|&v| distance(x[v as usize], targets[f][v as usize]))
+                        .fold(0.0, f64::max),
             };
             (inside, stats)
         })
         .collect();
     let frames_in: Vec<&InsideFrame> = per.iter().map(|(i, _)| i).collect();
     let stats: Vec<FrameStats> = per.iter().map(|(_, s)| s.clone()).collect();
-    let (max_speed_frame, max_speed) = stats
-        .iter()
-        .map(|s| s.max_speed)
-        .enumerate()
-        .fold((0, 0.0), |best, (f, v)| if v > best.1 { (f, v) } else { best });
+    let (max_speed_frame, max_speed) =
+        stats
+            .iter()
+            .map(|s| s.max_speed)
+            .enumerate()
+            .fold(
+                (0, 0.0),
+                |best, (f, v)| if v > best.1 { (f, v) } else { best },
+            );
     let summary = Summary {
         frames: stats.len(),
         inside: Inside::of(&frames_in),
-        mean_strain_pct: stats.iter().map(|s| s.strain_pct).sum::<f64>() / stats.len().max(1) as f64,
+        mean_strain_pct: stats.iter().map(|s| s.strain_pct).sum::<f64>()
+            / stats.len().max(1) as f64,
         max_strain_pct: stats.iter().map(|s| s.strain_pct).fold(0.0, f64::max),
         max_speed,
         max_speed_frame,
@@ -98,8 +111,15 @@ pub fn first_explosion(frames: &[Vec<[f32; 3]>], fps: f32, limit: f32) -> Option
         if x.iter().flatten().any(|c| !c.is_finite()) {
             return Some((f, "non-finite vertex positions".to_string()));
         }
-        let speed = f.checked_sub(1).map_or(0.0, |p| max_step(&frames[p], x) * fps as f64);
-        (speed > limit as f64).then(|| (f, format!("a vertex moved at {speed:.1} m/s (limit {limit} m/s)")))
+        let speed = f
+            .checked_sub(1)
+            .map_or(0.0, |p| max_step(&frames[p], x) * fps as f64);
+        (speed > limit as f64).then(|| {
+            (
+                f,
+                format!("a vertex moved at {speed:.1} m/s (limit {limit} m/s)"),
+            )
+        })
     })
 }
 
@@ -112,7 +132,10 @@ pub fn check(frames: &[Vec<[f32; 3]>], fps: f32, limit: f32, lead_in: usize) -> 
 }
 
 fn max_step(a: &[[f32; 3]], b: &[[f32; 3]]) -> f64 {
-    a.iter().zip(b).map(|(p, q)| distance(*p, *q)).fold(0.0, f64::max)
+    a.iter()
+        .zip(b)
+        .map(|(p, q)| distance(*p, *q))
+        .fold(0.0, f64::max)
 }
 
 fn distance(a: [f32; 3], b: [f32; 3]) -> f64 {

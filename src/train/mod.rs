@@ -2,6 +2,7 @@
 //! log, checkpoints, the NaN guard, Adam) and each kind's trainer (`pbns`; the dynamic one next).
 
 pub mod adam;
+pub mod dynamic;
 pub mod losses;
 pub mod nearest;
 pub mod pbns;

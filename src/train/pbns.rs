@@ -11,8 +11,8 @@ use crate::fabric::Fabric;
 use crate::garment::Garment;
 use crate::metrics::{ClothGeometry, Metrics};
 use crate::models::file::{
-    points_hash, BodyInfo, EpochRecord, GarmentInfo, KindInfo, LossTerms, ModelFile, ModelInfo,
-    PbnsInfo, TrainingInfo, UvInfo, FORMAT, VERSION,
+    BodyInfo, EpochRecord, GarmentInfo, KindInfo, LossTerms, ModelFile, ModelInfo, PbnsInfo,
+    TrainingInfo, FORMAT, VERSION,
 };
 use crate::models::pbns::flat;
 use crate::models::pose_features::{PoseBatch, PER_JOINT};
@@ -471,6 +471,7 @@ impl Trainer {
     pub fn model(&self) -> &Pbns {
         match &self.file.model {
             Model::Pbns(m) => m,
+            Model::Dynamic(_) => unreachable!("a PBNS trainer holds a PBNS model"),
         }
     }
 
@@ -478,12 +479,14 @@ impl Trainer {
     pub fn info(&self) -> &PbnsInfo {
         match &self.file.info.model {
             KindInfo::Pbns(p) => p,
+            KindInfo::Dynamic(_) => unreachable!("a PBNS trainer holds a PBNS model"),
         }
     }
 
     fn info_mut(&mut self) -> &mut PbnsInfo {
         match &mut self.file.info.model {
             KindInfo::Pbns(p) => p,
+            KindInfo::Dynamic(_) => unreachable!("a PBNS trainer holds a PBNS model"),
         }
     }
 
@@ -736,7 +739,9 @@ impl Trainer {
             );
         }
         let history = b.history.clone();
-        let Model::Pbns(mut model) = checkpoint.model;
+        let Model::Pbns(mut model) = checkpoint.model else {
+            bail!("{}: a dynamic model, not a PBNS checkpoint", path.display());
+        };
         model.set_trainable(self.settings.train_weights);
         let params = model.parameters(self.settings.train_weights);
         self.adam.restore(&params, &checkpoint.extra)?;
@@ -835,27 +840,12 @@ fn describe(
     motion_names: Vec<String>,
     inpainted: usize,
 ) -> ModelInfo {
-    let rest = &garment.mesh.positions;
     ModelInfo {
         format: FORMAT.into(),
         version: VERSION,
         skeleton: body.skeleton.to_plain(),
-        garment: GarmentInfo {
-            name: garment.name.clone(),
-            vertices: rest.len(),
-            faces: garment.mesh.triangles.clone(),
-            uv: garment.mesh.uv.as_ref().map(|uv| UvInfo {
-                coords: uv.coords.clone(),
-                triangles: uv.triangles.clone(),
-            }),
-            pinned: pinned_list.to_vec(),
-            rest_hash: points_hash(rest),
-        },
-        body: BodyInfo {
-            name: body.name.clone(),
-            vertices: body.mesh.vertex_count(),
-            rest_hash: points_hash(&body.mesh.positions),
-        },
+        garment: GarmentInfo::of(garment, pinned_list),
+        body: BodyInfo::of(body),
         fabric: fabric.clone(),
         model: KindInfo::Pbns(PbnsInfo {
             shape,

@@ -9,5 +9,5 @@ mod metrics;
 mod pbns;
 mod pose;
 mod retarget;
-mod usd;
 mod simulate;
+mod usd;

@@ -20,8 +20,18 @@ fn blender_skipped() -> bool {
 /// the body everywhere.
 fn waist_band(dir: &Path) -> PathBuf {
     let skirt = garmentbake::garment::Garment::read(&sample("garments/skirt.obj")).unwrap();
-    let top = skirt.mesh.positions.iter().map(|p| p[1]).fold(f32::MIN, f32::max);
-    let keep: Vec<bool> = skirt.mesh.positions.iter().map(|p| p[1] > top - 0.08).collect();
+    let top = skirt
+        .mesh
+        .positions
+        .iter()
+        .map(|p| p[1])
+        .fold(f32::MIN, f32::max);
+    let keep: Vec<bool> = skirt
+        .mesh
+        .positions
+        .iter()
+        .map(|p| p[1] > top - 0.08)
+        .collect();
     let mut index = vec![u32::MAX; keep.len()];
     let mut positions = Vec::new();
     for (v, _) in keep.iter().enumerate().filter(|(_, k)| **k) {
@@ -35,19 +45,40 @@ fn waist_band(dir: &Path) -> PathBuf {
         .filter(|t| t.iter().all(|&v| keep[v as usize]))
         .map(|t| t.map(|v| index[v as usize]))
         .collect();
-    let pinned: Vec<u32> = skirt.sidecar.pinned.iter().map(|&v| index[v as usize]).filter(|&v| v != u32::MAX).collect();
+    let pinned: Vec<u32> = skirt
+        .sidecar
+        .pinned
+        .iter()
+        .map(|&v| index[v as usize])
+        .filter(|&v| v != u32::MAX)
+        .collect();
     assert!(pinned.len() > 20, "the band keeps the waist pins");
     let obj = dir.join("band.obj");
-    write_obj(&obj, &TriMesh::new(positions, triangles), "waist band of the sample skirt").unwrap();
+    write_obj(
+        &obj,
+        &TriMesh::new(positions, triangles),
+        "waist band of the sample skirt",
+    )
+    .unwrap();
     std::fs::write(dir.join("band.toml"), format!("pinned = {pinned:?}\n")).unwrap();
     obj
 }
 
 fn simulate(garment: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
     let mut args = vec![
-        "simulate", "--body", "samples/body.glb", "--garment", garment.to_str().unwrap(),
-        "--motion", "samples/motions/01_01.bvh", "--fps", "30", "--out", out.to_str().unwrap(),
-        "--no-cache", "--json",
+        "simulate",
+        "--body",
+        "samples/body.glb",
+        "--garment",
+        garment.to_str().unwrap(),
+        "--motion",
+        "samples/motions/01_01.bvh",
+        "--fps",
+        "30",
+        "--out",
+        out.to_str().unwrap(),
+        "--no-cache",
+        "--json",
     ];
     args.extend_from_slice(extra);
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_garmentbake"))
@@ -55,7 +86,11 @@ fn simulate(garment: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
         .args(&args)
         .output()
         .unwrap();
-    assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     serde_json::from_slice(&out.stdout).unwrap()
 }
 
@@ -75,17 +110,36 @@ fn a_waist_band_on_a_walking_body_stays_outside_and_pins_follow_within_a_millime
 
     // Inside: our winding number of the posed body, recomputed here from the file.
     let body = garmentbake::io::gltf_body::read_body(&sample("body.glb")).unwrap();
-    let clip = garmentbake::motion::load_clip(&sample("motions/01_01.bvh"), &[], &body.skeleton, Some(30.0)).unwrap();
+    let clip = garmentbake::motion::load_clip(
+        &sample("motions/01_01.bvh"),
+        &[],
+        &body.skeleton,
+        Some(30.0),
+    )
+    .unwrap();
     let pins = &garment.sidecar.pinned;
     let rest_index = garmentbake::geometry::PointIndex::new(&body.mesh.positions).unwrap();
-    let under: Vec<usize> = pins.iter().map(|&v| rest_index.nearest(garment.mesh.positions[v as usize]).0 as usize).collect();
+    let under: Vec<usize> = pins
+        .iter()
+        .map(|&v| rest_index.nearest(garment.mesh.positions[v as usize]).0 as usize)
+        .collect();
     let mut worst_pin = 0.0f32;
     for (f, x) in frames.iter().enumerate() {
         let pose = clip.animation.local_pose(f);
         let posed = PosedBody::new(&body, &pose);
         let surface = SurfaceIndex::new(&posed.points, &body.mesh.triangles);
-        let deep: Vec<(usize, f32)> = x.iter().enumerate().filter(|(_, p)| surface.is_inside(**p)).map(|(v, p)| (v, surface.distance(*p))).collect();
-        assert!(deep.is_empty(), "frame {f}: {} vertices inside the body (vertex, depth m): {:?}", deep.len(), &deep[..deep.len().min(5)]);
+        let deep: Vec<(usize, f32)> = x
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| surface.is_inside(**p))
+            .map(|(v, p)| (v, surface.distance(*p)))
+            .collect();
+        assert!(
+            deep.is_empty(),
+            "frame {f}: {} vertices inside the body (vertex, depth m): {:?}",
+            deep.len(),
+            &deep[..deep.len().min(5)]
+        );
         // Pins ride the skin vertex under them: its skinning transform applied to the pin at rest.
         let skinning = body.skeleton.skinning_matrices(&pose);
         for (&v, &b) in pins.iter().zip(&under) {
@@ -96,7 +150,10 @@ fn a_waist_band_on_a_walking_body_stays_outside_and_pins_follow_within_a_millime
             worst_pin = worst_pin.max((target - nalgebra::Point3::new(q[0], q[1], q[2])).norm());
         }
     }
-    assert!(worst_pin < 1e-3, "a pinned vertex is {worst_pin} m off the skin it is pinned to");
+    assert!(
+        worst_pin < 1e-3,
+        "a pinned vertex is {worst_pin} m off the skin it is pinned to"
+    );
     let drift = report["summary"]["pinned_error_max_mm"].as_f64().unwrap();
     assert!(drift < 1.0, "the report says pins drift {drift} mm");
     assert_eq!(report["frames"], 8);
@@ -105,14 +162,24 @@ fn a_waist_band_on_a_walking_body_stays_outside_and_pins_follow_within_a_millime
     // Same inputs, another thread count: the same bytes.
     let again = dir.join("again.pc2");
     simulate(&band, &again, &["--frames", "8", "--threads", "2"]);
-    assert_eq!(std::fs::read(&pc2).unwrap(), std::fs::read(&again).unwrap(), "not deterministic");
+    assert_eq!(
+        std::fs::read(&pc2).unwrap(),
+        std::fs::read(&again).unwrap(),
+        "not deterministic"
+    );
 }
 
 /// An `n`×`n` grid patch, `size` metres wide, horizontal, centred at `c`.
 fn patch(dir: &Path, name: &str, c: [f32; 3], size: f32, n: u32) -> PathBuf {
     let step = size / (n - 1) as f32;
     let positions = (0..n * n)
-        .map(|k| [c[0] - size / 2.0 + (k % n) as f32 * step, c[1], c[2] - size / 2.0 + (k / n) as f32 * step])
+        .map(|k| {
+            [
+                c[0] - size / 2.0 + (k % n) as f32 * step,
+                c[1],
+                c[2] - size / 2.0 + (k / n) as f32 * step,
+            ]
+        })
         .collect();
     let triangles = (0..n - 1)
         .flat_map(|j| (0..n - 1).map(move |i| (j * n + i, n)))
@@ -146,15 +213,40 @@ fn a_free_patch_falls_half_g_t_squared_along_minus_y_at_any_frame_rate() {
         let pc2 = dir.join(format!("fall{fps}.pc2"));
         let report = {
             let mut args = vec![
-                "simulate", "--body", "samples/body.glb", "--garment", obj.to_str().unwrap(),
-                "--motion", "samples/motions/131_01.bvh", "--fps", fps, "--out", pc2.to_str().unwrap(),
-                "--config", fabric.to_str().unwrap(), "--frames", "10", "--settle", "0", "--blend", "0",
-                "--no-cache", "--json",
+                "simulate",
+                "--body",
+                "samples/body.glb",
+                "--garment",
+                obj.to_str().unwrap(),
+                "--motion",
+                "samples/motions/131_01.bvh",
+                "--fps",
+                fps,
+                "--out",
+                pc2.to_str().unwrap(),
+                "--config",
+                fabric.to_str().unwrap(),
+                "--frames",
+                "10",
+                "--settle",
+                "0",
+                "--blend",
+                "0",
+                "--no-cache",
+                "--json",
             ];
             args.push("--threads");
             args.push("1");
-            let out = std::process::Command::new(env!("CARGO_BIN_EXE_garmentbake")).current_dir(root()).args(&args).output().unwrap();
-            assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+            let out = std::process::Command::new(env!("CARGO_BIN_EXE_garmentbake"))
+                .current_dir(root())
+                .args(&args)
+                .output()
+                .unwrap();
+            assert!(
+                out.status.success(),
+                "{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
             serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()
         };
         assert_eq!(report["lead_in_frames"], 0);
@@ -162,7 +254,10 @@ fn a_free_patch_falls_half_g_t_squared_along_minus_y_at_any_frame_rate() {
         let t = 9.0 / fps.parse::<f64>().unwrap();
         let drop = mean(&frames[0], 1) - mean(&frames[9], 1);
         let expected = 0.5 * 9.81 * t * t;
-        assert!((drop / expected - 1.0).abs() < 0.03, "{fps} fps: fell {drop} m in {t} s, ½gt² = {expected}");
+        assert!(
+            (drop / expected - 1.0).abs() < 0.03,
+            "{fps} fps: fell {drop} m in {t} s, ½gt² = {expected}"
+        );
         for axis in [0, 2] {
             let moved = (mean(&frames[9], axis) - mean(&frames[0], axis)).abs();
             assert!(moved < 1e-3, "{fps} fps: moved {moved} m along axis {axis}");
@@ -180,23 +275,52 @@ fn failures_name_their_cause_and_write_nothing() {
     let out = dir.join("x.pc2");
     let run = |extra: &[&str], garment: &Path| {
         let mut args = vec![
-            "simulate", "--body", "samples/body.glb", "--garment", garment.to_str().unwrap(),
-            "--motion", "samples/motions/131_01.bvh", "--fps", "30", "--out", out.to_str().unwrap(),
-            "--frames", "6", "--settle", "0", "--blend", "0", "--no-cache",
+            "simulate",
+            "--body",
+            "samples/body.glb",
+            "--garment",
+            garment.to_str().unwrap(),
+            "--motion",
+            "samples/motions/131_01.bvh",
+            "--fps",
+            "30",
+            "--out",
+            out.to_str().unwrap(),
+            "--frames",
+            "6",
+            "--settle",
+            "0",
+            "--blend",
+            "0",
+            "--no-cache",
         ];
         args.extend_from_slice(extra);
-        let o = std::process::Command::new(env!("CARGO_BIN_EXE_garmentbake")).current_dir(root()).args(&args).output().unwrap();
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_garmentbake"))
+            .current_dir(root())
+            .args(&args)
+            .output()
+            .unwrap();
         let err = String::from_utf8_lossy(&o.stderr).into_owned();
         assert_eq!(o.status.code(), Some(2), "{err}");
-        assert_eq!(err.lines().filter(|l| !l.trim().is_empty()).count(), 1, "{err}");
+        assert_eq!(
+            err.lines().filter(|l| !l.trim().is_empty()).count(),
+            1,
+            "{err}"
+        );
         assert!(!out.exists(), "nothing written");
         err
     };
     // A falling patch passes 0.5 m/s between frames 2 and 3: taken for an explosion.
     let err = run(&["--speed-limit", "0.5"], &obj);
-    assert!(err.contains("exploded at frame 3 of the clip") && err.contains("m/s"), "{err}");
+    assert!(
+        err.contains("exploded at frame 3 of the clip") && err.contains("m/s"),
+        "{err}"
+    );
     let err = run(&["--blender", "/nonexistent/blender"], &obj);
-    assert!(err.contains("Blender not found") && err.contains("apt-get install blender"), "{err}");
+    assert!(
+        err.contains("Blender not found") && err.contains("apt-get install blender"),
+        "{err}"
+    );
     let inside = patch(&dir, "inside", [0.0, 1.1, 0.0], 0.08, 4);
     let err = run(&[], &inside);
     assert!(err.contains("inside the body"), "{err}");

@@ -1,0 +1,523 @@
+//! The generative space: `S` (convolutions over the descriptor map) → `E_sta` → `Z` → `D` →
+//! feature map `ξ` → per-vertex MLP `R(ξ_i, u_i)` → displacement `d_i` in the vertex's rest frame
+//! `H0_i` → `ĝ_i = g0_i + H0_i d_i` → skinned by the seeds:
+//! `g_i = Σ_j w_ij M_j ĝ_i`, `w_ij = softmax_j(−|ĝ_i − b0_j|² / 2ρ²_part(j))`.
+//! Deviation from the paper: no instance norm (the 2×2 and 4×4 maps of the bottleneck have too
+//! few texels for per-map statistics); LeakyReLU(0.2) everywhere.
+
+use super::seeds::{Seeds, PARTS};
+use super::uv::UvRaster;
+use crate::geometry::{v3, vertex_normals, TriMesh};
+use anyhow::{bail, Result};
+use serde::{Deserialize, Serialize};
+use tch::nn::{self, Module};
+use tch::{Device, Kind, Tensor};
+
+/// Sizes of the network.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SpaceShape {
+    pub preset: String,
+    /// The UV map is `map`×`map` texels (a power of two ≥ 8).
+    pub map: usize,
+    pub seeds: usize,
+    /// Channels of `S(M^P)`.
+    pub features: usize,
+    /// Channels after each stride-2 convolution of `E_sta`, down to 2×2.
+    pub encoder: Vec<usize>,
+    pub latent: usize,
+    /// Channels of the decoded feature map `ξ`.
+    pub xi: usize,
+    /// Width and depth of `R`.
+    pub mlp: usize,
+    pub mlp_layers: usize,
+}
+
+impl SpaceShape {
+    /// `cpu` (64², 128 seeds, channels ≤ 256: trains on a laptop) or `paper` (128², 581 seeds,
+    /// channels to 1024, as the reference; for a GPU).
+    pub fn preset(name: &str) -> Result<SpaceShape> {
+        let (map, seeds, features, encoder, xi, mlp, mlp_layers) = match name {
+            "cpu" => (64, 128, 32, vec![32, 64, 128, 128, 256], 16, 128, 4),
+            "paper" => (
+                128,
+                581,
+                128,
+                vec![128, 256, 512, 1024, 1024, 1024],
+                128,
+                256,
+                6,
+            ),
+            _ => bail!("--preset {name}: cpu or paper"),
+        };
+        Ok(SpaceShape {
+            preset: name.into(),
+            map,
+            seeds,
+            features,
+            encoder,
+            latent: 64,
+            xi,
+            mlp,
+            mlp_layers,
+        })
+    }
+
+    fn check(&self) -> Result<()> {
+        if !self.map.is_power_of_two() || self.map < 8 || self.map >> self.encoder.len() != 2 {
+            bail!(
+                "map {} with {} encoder layers does not reach 2×2",
+                self.map,
+                self.encoder.len()
+            );
+        }
+        Ok(())
+    }
+}
+
+/// The garment and body data the network runs on, as tensors.
+pub struct Consts {
+    texel_vertices: Tensor,
+    texel_weights: Tensor,
+    mask: Tensor,
+    /// Vertex UVs as a `grid_sampler` grid `[1, V, 1, 2]` in [−1, 1].
+    grid: Tensor,
+    uv: Tensor,
+    /// `[V, 3, 3]`: rows normal, tangent, bitangent of each rest vertex.
+    frames: Tensor,
+    pub rest: Tensor,
+    pub seed_rest: Tensor,
+    seed_part: Tensor,
+}
+
+impl Consts {
+    pub fn new(garment: &TriMesh, raster: &UvRaster, seeds: &Seeds, device: Device) -> Consts {
+        let t = raster.texel_vertices.len() as i64;
+        let flat =
+            |v: Vec<f32>, dims: &[i64]| Tensor::from_slice(&v).reshape(dims).to_device(device);
+        let idx: Vec<i64> = raster
+            .texel_vertices
+            .iter()
+            .flatten()
+            .map(|&v| v as i64)
+            .collect();
+        let w: Vec<f32> = raster.texel_weights.iter().flatten().copied().collect();
+        let covered: Vec<f32> = raster
+            .texel_weights
+            .iter()
+            .map(|w| f32::from(w.iter().sum::<f32>() > 0.5))
+            .collect();
+        let n = raster.size as i64;
+        let grid: Vec<f32> = raster
+            .vertex_uv
+            .iter()
+            .flat_map(|p| [2.0 * p[0] - 1.0, 2.0 * p[1] - 1.0])
+            .collect();
+        let uv: Vec<f32> = raster.vertex_uv.iter().flatten().copied().collect();
+        let v = garment.vertex_count() as i64;
+        Consts {
+            texel_vertices: Tensor::from_slice(&idx).to_device(device),
+            texel_weights: flat(w, &[t, 3, 1]),
+            mask: flat(covered, &[1, 1, n, n]),
+            grid: flat(grid, &[1, v, 1, 2]),
+            uv: flat(uv, &[v, 2]),
+            frames: flat(rest_frames(garment), &[v, 3, 3]),
+            rest: flat(
+                garment.positions.iter().flatten().copied().collect(),
+                &[v, 3],
+            ),
+            seed_rest: flat(
+                seeds.rest.iter().flatten().copied().collect(),
+                &[seeds.rest.len() as i64, 3],
+            ),
+            seed_part: Tensor::from_slice(
+                &seeds.parts.iter().map(|&p| p as i64).collect::<Vec<_>>(),
+            )
+            .to_device(device),
+        }
+    }
+}
+
+/// Each vertex's rest frame: normal, a tangent (the normal × a fixed axis, whichever of Y and X
+/// is less parallel to it) and bitangent. Flattened `[V, 3, 3]`, rows n, t, b.
+fn rest_frames(mesh: &TriMesh) -> Vec<f32> {
+    vertex_normals(&mesh.positions, &mesh.triangles)
+        .iter()
+        .flat_map(|&n| {
+            let n = v3(n);
+            let axis = if n.y.abs() < 0.9 {
+                nalgebra::Vector3::y()
+            } else {
+                nalgebra::Vector3::x()
+            };
+            let t = n.cross(&axis).normalize();
+            let b = n.cross(&t);
+            [n, t, b].into_iter().flat_map(|r| [r.x, r.y, r.z])
+        })
+        .collect()
+}
+
+pub struct Space {
+    pub vs: nn::VarStore,
+    pub shape: SpaceShape,
+    /// `S`'s first layer, a 1×1 convolution over the `3N + 1` descriptor channels: weight
+    /// `[C, 3N + 1]` (the last column reads the layout mask) and bias `[C]`.
+    s0_weight: Tensor,
+    s0_bias: Tensor,
+    s: nn::Sequential,
+    encoder: nn::Sequential,
+    encoder_fc: nn::Linear,
+    decoder_fc: nn::Linear,
+    decoder: nn::Sequential,
+    r: nn::Sequential,
+    /// ln ρ per body part ([`PARTS`]).
+    pub log_radius: Tensor,
+    pub consts: Consts,
+}
+
+/// Initial kernel radius (metres): under the seed spacing (~6 cm for the cpu preset on the skirt), so
+/// each vertex starts on its few nearest seeds (the waist band then follows the hips within 2 cm).
+const RADIUS0: f64 = 0.05;
+/// `R`'s output scale: displacements start at millimetres.
+const DISPLACEMENT_SCALE: f64 = 0.05;
+
+fn leaky() -> impl Module {
+    nn::func(|x| x.leaky_relu())
+}
+
+impl Space {
+    pub fn new(shape: SpaceShape, consts: Consts, device: Device) -> Result<Space> {
+        shape.check()?;
+        let vs = nn::VarStore::new(device);
+        let root = vs.root();
+        let input = 3 * shape.seeds as i64 + 1;
+        let f = shape.features as i64;
+        let bound = 1.0 / (input as f64).sqrt();
+        let s0_weight = (&root / "s" / "0").var(
+            "weight",
+            &[f, input],
+            nn::Init::Uniform {
+                lo: -bound,
+                up: bound,
+            },
+        );
+        let s0_bias = (&root / "s" / "0").var(
+            "bias",
+            &[f],
+            nn::Init::Uniform {
+                lo: -bound,
+                up: bound,
+            },
+        );
+        let s = nn::seq()
+            .add(leaky())
+            .add(nn::conv2d(
+                &root / "s" / "1",
+                f,
+                f,
+                3,
+                nn::ConvConfig {
+                    padding: 1,
+                    ..Default::default()
+                },
+            ))
+            .add(leaky());
+        let down = nn::ConvConfig {
+            stride: 2,
+            padding: 1,
+            ..Default::default()
+        };
+        let up = nn::ConvTransposeConfig {
+            stride: 2,
+            padding: 1,
+            ..Default::default()
+        };
+        let mut encoder = nn::seq();
+        let mut c = f;
+        for (k, &o) in shape.encoder.iter().enumerate() {
+            encoder = encoder
+                .add(nn::conv2d(&root / "enc" / k, c, o as i64, 4, down))
+                .add(leaky());
+            c = o as i64;
+        }
+        let bottleneck = c * 4;
+        let latent = shape.latent as i64;
+        let encoder_fc = nn::linear(&root / "enc_fc", bottleneck, latent, Default::default());
+        let decoder_fc = nn::linear(&root / "dec_fc", latent, bottleneck, Default::default());
+        let mut decoder = nn::seq();
+        let outs: Vec<i64> = shape
+            .encoder
+            .iter()
+            .rev()
+            .skip(1)
+            .map(|&o| o as i64)
+            .chain([shape.xi as i64])
+            .collect();
+        for (k, &o) in outs.iter().enumerate() {
+            decoder = decoder.add(nn::conv_transpose2d(&root / "dec" / k, c, o, 4, up));
+            if k + 1 < outs.len() {
+                decoder = decoder.add(leaky());
+            }
+            c = o;
+        }
+        let mut r = nn::seq();
+        let mut width = shape.xi as i64 + 2;
+        for k in 0..shape.mlp_layers {
+            let last = k + 1 == shape.mlp_layers;
+            let o = if last { 3 } else { shape.mlp as i64 };
+            // The last layer starts at zero: the untrained space is plain seed skinning of the rest garment.
+            let config = if last {
+                nn::LinearConfig {
+                    ws_init: nn::Init::Const(0.0),
+                    bs_init: Some(nn::Init::Const(0.0)),
+                    bias: true,
+                }
+            } else {
+                Default::default()
+            };
+            r = r.add(nn::linear(&root / "r" / k, width, o, config));
+            if !last {
+                r = r.add(leaky());
+            }
+            width = o;
+        }
+        let log_radius = root.var(
+            "log_radius",
+            &[PARTS.len() as i64],
+            nn::Init::Const(RADIUS0.ln()),
+        );
+        Ok(Space {
+            vs,
+            shape,
+            s0_weight,
+            s0_bias,
+            s,
+            encoder,
+            encoder_fc,
+            decoder_fc,
+            decoder,
+            r,
+            log_radius,
+            consts,
+        })
+    }
+
+    /// `S`'s first layer applied to the body-relative descriptor map `M^P` of garments
+    /// `g [B, V, 3]` against seeds `b [B, N, 3]`, without building the `3N`-channel map: a
+    /// linear layer over `[g_i − b_j]_j` is `A g_i − Σ_j W_j b_j` with `A = Σ_j W_j`, and
+    /// scattering vertices into texels (barycentric weights summing to one) commutes with it.
+    /// Exactly the 1×1 convolution of the map; `[B, C, H, W]` before the activation.
+    pub fn descriptor_features(&self, g: &Tensor, b: &Tensor) -> Tensor {
+        let (bs, n) = (g.size()[0], self.shape.seeds as i64);
+        let c = self.s0_weight.size()[0];
+        let w = self.s0_weight.narrow(1, 0, 3 * n).reshape([c, n, 3]);
+        let a = w.sum_dim_intlist(1, false, Kind::Float);
+        let offset = Tensor::einsum("cnk,bnk->bc", &[w, b.shallow_clone()], None::<i64>);
+        let per_vertex = Tensor::einsum("ck,bvk->bvc", &[a, g.shallow_clone()], None::<i64>)
+            - offset.unsqueeze(1);
+        let k = &self.consts;
+        let per = per_vertex
+            .index_select(1, &k.texel_vertices)
+            .reshape([bs, -1, 3, c]);
+        let side = self.shape.map as i64;
+        let map = (per * &k.texel_weights)
+            .sum_dim_intlist(2, false, Kind::Float)
+            .permute([0, 2, 1])
+            .reshape([bs, c, side, side]);
+        let mask = self.s0_weight.select(1, 3 * n).reshape([1, c, 1, 1]) * &k.mask;
+        map + mask + self.s0_bias.reshape([1, c, 1, 1])
+    }
+
+    /// `Z [B, L]` of garments `g` with seeds at `b`: `E_sta(S(M^P))`.
+    pub fn encode(&self, g: &Tensor, b: &Tensor) -> Tensor {
+        self.encode_features(&self.static_features(g, b))
+    }
+
+    /// `S(M^P)`: the static feature map (the dynamic stage reuses it).
+    pub fn static_features(&self, g: &Tensor, b: &Tensor) -> Tensor {
+        self.s.forward(&self.descriptor_features(g, b))
+    }
+
+    /// `E_sta` on `S(M^P)` (the dynamic stage reuses `S` on its own).
+    pub fn encode_features(&self, features: &Tensor) -> Tensor {
+        let x = self.encoder.forward(features).flatten(1, -1);
+        self.encoder_fc.forward(&x)
+    }
+
+    /// Canonical garments `ĝ [B, V, 3]` of latents `z [B, L]`.
+    pub fn canonical(&self, z: &Tensor) -> Tensor {
+        let bs = z.size()[0];
+        let c = *self.shape.encoder.last().expect("encoder layers") as i64;
+        let x = self
+            .decoder_fc
+            .forward(z)
+            .leaky_relu()
+            .reshape([bs, c, 2, 2]);
+        let xi = self.decoder.forward(&x);
+        let k = &self.consts;
+        let grid = k.grid.expand([bs, -1, 1, 2], false);
+        let per_vertex = xi
+            .grid_sampler(&grid, 0, 1, false)
+            .squeeze_dim(3)
+            .permute([0, 2, 1]);
+        let v = per_vertex.size()[1];
+        let input = Tensor::cat(
+            &[per_vertex, k.uv.unsqueeze(0).expand([bs, v, 2], false)],
+            2,
+        );
+        let d = self.r.forward(&input) * DISPLACEMENT_SCALE;
+        &k.rest + Tensor::einsum("bvk,vkc->bvc", &[d, k.frames.shallow_clone()], None::<i64>)
+    }
+
+    /// Skins canonical garments by the seeds' transforms `m [B, N, 12]` (row-major 3×4).
+    pub fn skin(&self, canonical: &Tensor, m: &Tensor) -> Tensor {
+        let k = &self.consts;
+        let d2 = (canonical.unsqueeze(2) - k.seed_rest.unsqueeze(0).unsqueeze(0))
+            .square()
+            .sum_dim_intlist(3, false, Kind::Float);
+        let rho2 = (self.log_radius.index_select(0, &k.seed_part) * 2.0).exp();
+        let w = (-d2 / (rho2 * 2.0)).softmax(2, Kind::Float);
+        let (bs, v) = (canonical.size()[0], canonical.size()[1]);
+        let a = w.bmm(m).reshape([bs, v, 3, 4]);
+        let rot = a.narrow(3, 0, 3);
+        let shift = a.select(3, 3);
+        rot.matmul(&canonical.unsqueeze(3)).squeeze_dim(3) + shift
+    }
+
+    /// Encode → decode → skin: the space's reconstruction of garments `g` with seeds at `b`
+    /// and seed transforms `m`; also returns `z` and the canonical garments.
+    pub fn reconstruct(&self, g: &Tensor, b: &Tensor, m: &Tensor) -> (Tensor, Tensor, Tensor) {
+        let z = self.encode(g, b);
+        let canonical = self.canonical(&z);
+        (self.skin(&canonical, m), z, canonical)
+    }
+
+    /// The learnt kernel radius per body part (metres).
+    pub fn radii(&self) -> Vec<f64> {
+        let r: Vec<f32> = tch::no_grad(|| self.log_radius.exp())
+            .try_into()
+            .unwrap_or_default();
+        r.into_iter().map(f64::from).collect()
+    }
+
+    /// Trainable tensors by name, sorted (the file's and Adam's order).
+    pub fn parameters(&self) -> Vec<(String, Tensor)> {
+        let mut v: Vec<(String, Tensor)> = self.vs.variables().into_iter().collect();
+        v.sort_by(|a, b| a.0.cmp(&b.0));
+        v
+    }
+
+    /// Copies stored values into the parameters (shapes must match).
+    pub fn load_parameters(&mut self, stored: &[(String, Tensor)]) -> Result<()> {
+        let mut vars = self.vs.variables();
+        for (name, t) in stored {
+            let Some(p) = vars.get_mut(name) else {
+                continue;
+            };
+            if p.size() != t.size() {
+                bail!(
+                    "tensor '{name}' has shape {:?}, the network expects {:?}",
+                    t.size(),
+                    p.size()
+                );
+            }
+            tch::no_grad(|| p.copy_(t));
+        }
+        if let Some(missing) = vars.keys().find(|n| !stored.iter().any(|(s, _)| s == *n)) {
+            bail!("missing tensor '{missing}'");
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::test_meshes::grid;
+    use crate::geometry::FaceVaryingUv;
+
+    fn small_space() -> (Space, TriMesh) {
+        let mut mesh = grid(3, 3, 0.1);
+        let uv: Vec<[f32; 2]> = mesh
+            .positions
+            .iter()
+            .map(|p| [p[0] * 10.0, p[1] * 10.0])
+            .collect();
+        mesh.uv = Some(FaceVaryingUv {
+            coords: uv,
+            triangles: mesh.triangles.clone(),
+        });
+        let raster = UvRaster::new(&mesh, 8, "grid").unwrap();
+        let seeds = Seeds {
+            vertices: vec![0, 1, 2],
+            rest: vec![[0.0, -0.1, 0.0], [0.3, -0.1, 0.0], [0.0, -0.1, 0.3]],
+            parts: vec![0, 1, 2],
+        };
+        let consts = Consts::new(&mesh, &raster, &seeds, Device::Cpu);
+        let shape = SpaceShape {
+            preset: "test".into(),
+            map: 8,
+            seeds: 3,
+            features: 4,
+            encoder: vec![4, 4],
+            latent: 5,
+            xi: 3,
+            mlp: 8,
+            mlp_layers: 2,
+        };
+        tch::manual_seed(1);
+        (Space::new(shape, consts, Device::Cpu).unwrap(), mesh)
+    }
+
+    #[test]
+    fn factored_first_layer_equals_the_convolution_of_the_full_descriptor_map() {
+        let (space, mesh) = small_space();
+        let v = mesh.vertex_count() as i64;
+        let g = Tensor::randn([2, v, 3], (Kind::Float, Device::Cpu));
+        let b = Tensor::randn([2, 3, 3], (Kind::Float, Device::Cpu));
+        // The paper's map: [g_i − b_j]_j per vertex, scattered to texels, plus the mask channel.
+        let rel = (g.unsqueeze(2) - b.unsqueeze(1)).reshape([2, v, 9]);
+        let k = &space.consts;
+        let per = rel
+            .index_select(1, &k.texel_vertices)
+            .reshape([2, -1, 3, 9]);
+        let map = (per * &k.texel_weights)
+            .sum_dim_intlist(2, false, Kind::Float)
+            .permute([0, 2, 1])
+            .reshape([2, 9, 8, 8]);
+        let map = Tensor::cat(&[map, k.mask.expand([2, 1, 8, 8], false)], 1);
+        let conv = map.conv2d(
+            &space.s0_weight.reshape([4, 10, 1, 1]),
+            Some(&space.s0_bias),
+            [1, 1],
+            [0, 0],
+            [1, 1],
+            1,
+        );
+        let fast = space.descriptor_features(&g, &b);
+        let diff = (conv - fast).abs().max().double_value(&[]);
+        assert!(diff < 1e-5, "factored S0 differs by {diff}");
+    }
+
+    #[test]
+    fn the_untrained_space_is_seed_skinning_of_the_rest_garment() {
+        let (space, mesh) = small_space();
+        let z = Tensor::randn([1, 5], (Kind::Float, Device::Cpu));
+        let canonical = space.canonical(&z);
+        let rest = space.consts.rest.unsqueeze(0);
+        assert!(
+            (&canonical - &rest).abs().max().double_value(&[]) < 1e-7,
+            "R starts at zero"
+        );
+        // Every seed translated by t: the garment moves by t.
+        let mut m = [0f32; 12];
+        (m[0], m[5], m[10], m[3], m[7], m[11]) = (1.0, 1.0, 1.0, 0.5, -0.25, 2.0);
+        let m = Tensor::from_slice(&m)
+            .reshape([1, 1, 12])
+            .expand([1, 3, 12], false)
+            .contiguous();
+        let posed = space.skin(&canonical, &m);
+        let shift = Tensor::from_slice(&[0.5f32, -0.25, 2.0]).reshape([1, 1, 3]);
+        assert!((posed - rest - shift).abs().max().double_value(&[]) < 1e-6);
+        assert_eq!(mesh.vertex_count(), 16);
+    }
+}

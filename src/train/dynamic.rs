@@ -1,0 +1,583 @@
+//! Training the dynamic model's generative space (stage `space`) on simulated sequences:
+//! `L = L_rec + L_rand + λ1·L_SDF + λ2·L_reg` (λ1 = 100, λ2 = 0.001) with
+//! `L_rec = |G − G*|₁ + |ΔG − ΔG*|₁` (uniform Laplacian), `L_rand` the edge-length L1 of garments
+//! decoded from random latents against the rest garment, `L_SDF` a hinge on the exact signed
+//! distance to the rest body of the canonical garments (trained and random), `L_reg = |mean z² − 1|`.
+//! L1 terms are means over vertices and coordinates (metres).
+
+use super::adam::Adam;
+use super::{Blowup, Training};
+use crate::body::Body;
+use crate::fabric::Fabric;
+use crate::garment::Garment;
+use crate::geometry::edges::unique_edges;
+use crate::geometry::sdf_grid::SdfGrid;
+use crate::geometry::{SurfaceIndex, TriMesh};
+use crate::models::dynamic::space::Consts;
+use crate::models::dynamic::{seeds::PARTS, Seeds, Space, SpaceShape, UvRaster};
+use crate::models::file::{
+    self, BodyInfo, DynamicEpoch, DynamicInfo, DynamicTraining, GarmentInfo, KindInfo, ModelFile,
+    ModelInfo, SpaceTerms, FORMAT, VERSION,
+};
+use crate::models::Model;
+use crate::rig::{weights, SkelAnimation};
+use anyhow::{bail, Result};
+use std::path::Path;
+use tch::{Device, Kind, Tensor};
+
+/// One simulated clip: its motion and the garment at each frame.
+pub struct Sequence {
+    pub name: String,
+    pub clip: SkelAnimation,
+    pub garment: Vec<Vec<[f32; 3]>>,
+}
+
+#[derive(Clone, Debug)]
+pub struct Settings {
+    pub shape: SpaceShape,
+    pub epochs: usize,
+    pub batch: usize,
+    pub learning_rate: f64,
+    pub seed: u64,
+    pub device: Device,
+    /// Seeds are sampled on the body within this distance of the garment at rest (metres).
+    pub seed_reach: f32,
+    /// Random latents decoded per step for `L_rand` and `L_SDF`.
+    pub random: usize,
+    /// ε of the SDF hinge (metres).
+    pub sdf_margin: f32,
+}
+
+pub const LAMBDA_SDF: f64 = 100.0;
+pub const LAMBDA_REG: f64 = 0.001;
+/// SDF grid: node spacing and padding around the garment (metres).
+const SDF_SPACING: f32 = 0.008;
+const SDF_PAD: f32 = 0.08;
+
+impl Settings {
+    pub fn new(shape: SpaceShape) -> Settings {
+        Settings {
+            shape,
+            epochs: 60,
+            batch: 4,
+            learning_rate: 5e-4,
+            seed: 0,
+            device: Device::Cpu,
+            seed_reach: 0.25,
+            random: 2,
+            sdf_margin: 0.003,
+        }
+    }
+}
+
+/// Frames as tensors: garment `[F, V, 3]`, seed positions `[F, N, 3]`, seed transforms `[F, N, 12]`.
+pub struct FrameData {
+    pub garment: Tensor,
+    pub seeds: Tensor,
+    pub transforms: Tensor,
+}
+
+impl FrameData {
+    pub fn new(body: &Body, seeds: &Seeds, sequences: &[Sequence], device: Device) -> FrameData {
+        let (mut g, mut b, mut m) = (Vec::new(), Vec::new(), Vec::new());
+        for s in sequences {
+            for (f, frame) in s.garment.iter().enumerate() {
+                let skinning = body.skeleton.skinning_matrices(&s.clip.local_pose(f));
+                let t = seeds.transforms(body, &skinning);
+                g.extend(frame.iter().flatten().copied());
+                for (j, tj) in t.iter().enumerate() {
+                    let r = seeds.rest[j];
+                    b.extend((0..3).map(|k| {
+                        tj[4 * k] * r[0]
+                            + tj[4 * k + 1] * r[1]
+                            + tj[4 * k + 2] * r[2]
+                            + tj[4 * k + 3]
+                    }));
+                    m.extend_from_slice(tj);
+                }
+            }
+        }
+        let frames: i64 = sequences.iter().map(|s| s.garment.len() as i64).sum();
+        let n = seeds.rest.len() as i64;
+        let t = |v: Vec<f32>, d: &[i64]| Tensor::from_slice(&v).reshape(d).to_device(device);
+        FrameData {
+            garment: t(g, &[frames, -1, 3]),
+            seeds: t(b, &[frames, n, 3]),
+            transforms: t(m, &[frames, n, 12]),
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.garment.size()[0] as usize
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    fn batch(&self, idx: &Tensor) -> (Tensor, Tensor, Tensor) {
+        (
+            self.garment.index_select(0, idx),
+            self.seeds.index_select(0, idx),
+            self.transforms.index_select(0, idx),
+        )
+    }
+}
+
+/// Mesh operators for the losses: uniform Laplacian, edges and their rest lengths.
+struct MeshOps {
+    src: Tensor,
+    dst: Tensor,
+    degree: Tensor,
+    edges: Tensor,
+    rest_lengths: Tensor,
+}
+
+impl MeshOps {
+    fn new(mesh: &TriMesh, device: Device) -> MeshOps {
+        let pairs = unique_edges(&mesh.triangles);
+        let (mut src, mut dst) = (Vec::new(), Vec::new());
+        let mut degree = vec![0f32; mesh.vertex_count()];
+        for &[a, b] in &pairs {
+            src.extend([a as i64, b as i64]);
+            dst.extend([b as i64, a as i64]);
+            degree[a as usize] += 1.0;
+            degree[b as usize] += 1.0;
+        }
+        let edges: Vec<i64> = pairs.iter().flatten().map(|&v| v as i64).collect();
+        let rest = Tensor::from_slice(
+            &mesh
+                .positions
+                .iter()
+                .flatten()
+                .copied()
+                .collect::<Vec<f32>>(),
+        )
+        .reshape([-1, 3])
+        .to_device(device);
+        let edges = Tensor::from_slice(&edges)
+            .reshape([-1, 2])
+            .to_device(device);
+        let rest_lengths = edge_lengths(&rest.unsqueeze(0), &edges).squeeze_dim(0);
+        MeshOps {
+            src: Tensor::from_slice(&src).to_device(device),
+            dst: Tensor::from_slice(&dst).to_device(device),
+            degree: Tensor::from_slice(&degree)
+                .reshape([1, -1, 1])
+                .to_device(device)
+                .clamp_min(1.0),
+            edges,
+            rest_lengths,
+        }
+    }
+
+    /// `x − mean of its neighbours`, per vertex of `x [B, V, 3]`.
+    fn laplacian(&self, x: &Tensor) -> Tensor {
+        let sum = x
+            .zeros_like()
+            .index_add(1, &self.dst, &x.index_select(1, &self.src));
+        x - sum / &self.degree
+    }
+}
+
+fn edge_lengths(x: &Tensor, edges: &Tensor) -> Tensor {
+    let a = x.index_select(1, &edges.select(1, 0));
+    let b = x.index_select(1, &edges.select(1, 1));
+    (a - b)
+        .square()
+        .sum_dim_intlist(2, false, Kind::Float)
+        .clamp_min(1e-12)
+        .sqrt()
+}
+
+/// The rest body's exact signed distance as a `[1, 1, D, H, W]` volume for trilinear sampling.
+struct Sdf {
+    volume: Tensor,
+    lo: Tensor,
+    extent: Tensor,
+}
+
+impl Sdf {
+    fn new(body: &Body, garment: &TriMesh, device: Device) -> Sdf {
+        let surface = SurfaceIndex::new(&body.mesh.positions, &body.mesh.triangles);
+        let (lo, hi) = bounds(&garment.positions);
+        let grid = SdfGrid::new(&surface, lo, hi, SDF_PAD, SDF_SPACING);
+        let [nx, ny, nz] = grid.dims.map(|d| d as i64);
+        let extent: Vec<f32> = grid
+            .dims
+            .iter()
+            .map(|&d| (d - 1) as f32 * grid.spacing)
+            .collect();
+        Sdf {
+            volume: Tensor::from_slice(&grid.values)
+                .reshape([1, 1, nz, ny, nx])
+                .to_device(device),
+            lo: Tensor::from_slice(&grid.lo).to_device(device),
+            extent: Tensor::from_slice(&extent).to_device(device),
+        }
+    }
+
+    /// Signed distance `[B, V]` of points `[B, V, 3]`.
+    fn at(&self, p: &Tensor) -> Tensor {
+        let (b, v) = (p.size()[0], p.size()[1]);
+        let g = ((p - &self.lo) / &self.extent * 2.0 - 1.0).reshape([1, b * v, 1, 1, 3]);
+        self.volume.grid_sampler(&g, 0, 1, true).reshape([b, v])
+    }
+}
+
+fn bounds(points: &[[f32; 3]]) -> ([f32; 3], [f32; 3]) {
+    points
+        .iter()
+        .fold(([f32::MAX; 3], [f32::MIN; 3]), |(lo, hi), p| {
+            (
+                std::array::from_fn(|k| lo[k].min(p[k])),
+                std::array::from_fn(|k| hi[k].max(p[k])),
+            )
+        })
+}
+
+/// The generative-space trainer.
+pub struct SpaceTrainer {
+    pub file: ModelFile,
+    pub data: FrameData,
+    settings: Settings,
+    adam: Adam,
+    ops: MeshOps,
+    sdf: Sdf,
+}
+
+/// Reconstruction error of frames (per-vertex L2 distance).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct Reconstruction {
+    pub frames: usize,
+    pub mean_mm: f64,
+    pub p99_mm: f64,
+    pub max_mm: f64,
+    pub worst_frame: usize,
+}
+
+impl SpaceTrainer {
+    pub fn new(
+        body: Body,
+        garment: Garment,
+        fabric: Fabric,
+        sequences: &[Sequence],
+        settings: Settings,
+    ) -> Result<SpaceTrainer> {
+        if sequences.is_empty() || settings.batch == 0 {
+            bail!("nothing to train on: give --motion clips with their --sim caches, and a positive --batch");
+        }
+        tch::manual_seed(settings.seed as i64);
+        let device = settings.device;
+        let raster = UvRaster::new(&garment.mesh, settings.shape.map, &garment.name)?;
+        let seeds = Seeds::sample(
+            &body,
+            &garment.mesh.positions,
+            settings.shape.seeds,
+            settings.seed_reach,
+        )?;
+        let consts = Consts::new(&garment.mesh, &raster, &seeds, device);
+        let space = Space::new(settings.shape.clone(), consts, device)?;
+        let data = FrameData::new(&body, &seeds, sequences, device);
+        let ops = MeshOps::new(&garment.mesh, device);
+        let sdf = Sdf::new(&body, &garment.mesh, device);
+        let index = crate::geometry::PointIndex::new(&body.mesh.positions)?;
+        let (lbs, _) = weights::garment_skin(
+            &garment.mesh,
+            &body.skin,
+            body.skeleton.joint_count(),
+            &index,
+            8,
+            4,
+            Some(0.02),
+        );
+        let params = space.parameters();
+        let adam = Adam::new(
+            &params
+                .iter()
+                .map(|(n, t)| (n.clone(), t))
+                .collect::<Vec<_>>(),
+        );
+        let pinned = fabric
+            .pinned
+            .clone()
+            .unwrap_or_else(|| garment.sidecar.pinned.clone());
+        let info = ModelInfo {
+            format: FORMAT.into(),
+            version: VERSION,
+            skeleton: body.skeleton.to_plain(),
+            garment: GarmentInfo::of(&garment, &pinned),
+            body: BodyInfo::of(&body),
+            fabric,
+            model: KindInfo::Dynamic(DynamicInfo {
+                shape: settings.shape.clone(),
+                seeds: seeds.vertices.clone(),
+                seed_parts: seeds.parts.clone(),
+                parts: PARTS.iter().map(|p| p.to_string()).collect(),
+                radii: space.radii(),
+                fps: sequences[0].clip.fps,
+                training: DynamicTraining {
+                    stages: vec!["space".into()],
+                    seed: settings.seed,
+                    epochs: 0,
+                    batch: settings.batch,
+                    learning_rate: settings.learning_rate,
+                    motions: sequences
+                        .iter()
+                        .map(|s| format!("{} ({} frames)", s.name, s.garment.len()))
+                        .collect(),
+                    frames: data.len(),
+                },
+                history: Vec::new(),
+            }),
+        };
+        let file = ModelFile {
+            model: Model::Dynamic(Box::new(space)),
+            info,
+            lbs,
+            garment: garment.mesh,
+            body,
+            extra: Vec::new(),
+        };
+        Ok(SpaceTrainer {
+            file,
+            data,
+            settings,
+            adam,
+            ops,
+            sdf,
+        })
+    }
+
+    pub fn space(&self) -> &Space {
+        match &self.file.model {
+            Model::Dynamic(s) => s,
+            Model::Pbns(_) => unreachable!("a dynamic trainer holds a dynamic model"),
+        }
+    }
+
+    fn info_mut(&mut self) -> &mut DynamicInfo {
+        match &mut self.file.info.model {
+            KindInfo::Dynamic(d) => d,
+            KindInfo::Pbns(_) => unreachable!("a dynamic trainer holds a dynamic model"),
+        }
+    }
+
+    pub fn info(&self) -> &DynamicInfo {
+        match &self.file.info.model {
+            KindInfo::Dynamic(d) => d,
+            KindInfo::Pbns(_) => unreachable!("a dynamic trainer holds a dynamic model"),
+        }
+    }
+
+    /// Cosine decay from the learning rate to a tenth of it.
+    fn learning_rate(&self, epoch: usize) -> f64 {
+        let t = (epoch as f64 / (self.settings.epochs.max(2) - 1) as f64).min(1.0);
+        self.settings.learning_rate * (0.1 + 0.9 * 0.5 * (1.0 + (std::f64::consts::PI * t).cos()))
+    }
+
+    /// One optimisation step on frames `idx`: the weighted terms and the batch's mean error (m).
+    fn step(&mut self, idx: &Tensor, lr: f64) -> (SpaceTerms, f64) {
+        let (g, b, m) = self.data.batch(idx);
+        let space = self.space();
+        let (pred, z, canonical) = space.reconstruct(&g, &b, &m);
+        let positions = (&pred - &g).abs().mean(Kind::Float);
+        let laplacian = (self.ops.laplacian(&pred) - self.ops.laplacian(&g))
+            .abs()
+            .mean(Kind::Float);
+        let latent = (z.square().mean_dim(1, false, Kind::Float) - 1.0)
+            .abs()
+            .mean(Kind::Float)
+            * LAMBDA_REG;
+        let zr = Tensor::randn(
+            [self.settings.random as i64, space.shape.latent as i64],
+            (Kind::Float, self.settings.device),
+        );
+        let random = space.canonical(&zr);
+        let random_edges = (edge_lengths(&random, &self.ops.edges) - &self.ops.rest_lengths)
+            .abs()
+            .mean(Kind::Float);
+        let eps = self.settings.sdf_margin as f64;
+        let hinge = |x: &Tensor| (-self.sdf.at(x) + eps).relu().mean(Kind::Float);
+        let sdf = (hinge(&canonical) + hinge(&random)) * LAMBDA_SDF;
+        let loss = &positions + &laplacian + &random_edges + &sdf + &latent;
+        loss.backward();
+        let err = tch::no_grad(|| {
+            (&pred - &g)
+                .square()
+                .sum_dim_intlist(2, false, Kind::Float)
+                .sqrt()
+                .mean(Kind::Float)
+                .double_value(&[])
+        });
+        let params: Vec<Tensor> = space.parameters().into_iter().map(|(_, t)| t).collect();
+        let lrs = vec![lr; params.len()];
+        self.adam.update(&params, &lrs);
+        let v = |t: &Tensor| t.double_value(&[]);
+        (
+            SpaceTerms {
+                positions: v(&positions),
+                laplacian: v(&laplacian),
+                random_edges: v(&random_edges),
+                sdf: v(&sdf),
+                latent: v(&latent),
+            },
+            err,
+        )
+    }
+
+    /// Reconstructions of every frame of `data` (no gradients), `[F, V, 3]`.
+    pub fn reconstruct(space: &Space, data: &FrameData) -> Tensor {
+        crate::models::predict_chunks(data.len(), |s, n| {
+            let idx = Tensor::arange_start(
+                s as i64,
+                (s + n) as i64,
+                (Kind::Int64, data.garment.device()),
+            );
+            let (g, b, m) = data.batch(&idx);
+            space.reconstruct(&g, &b, &m).0
+        })
+    }
+
+    /// Per-vertex L2 error of the space's reconstructions of `data`.
+    pub fn measure(space: &Space, data: &FrameData) -> Reconstruction {
+        let pred = Self::reconstruct(space, data);
+        let d = (pred - &data.garment)
+            .square()
+            .sum_dim_intlist(2, false, Kind::Float)
+            .sqrt();
+        let per_frame: Vec<f32> = d
+            .mean_dim(1, false, Kind::Float)
+            .try_into()
+            .unwrap_or_default();
+        let mut all: Vec<f32> = d.flatten(0, -1).try_into().unwrap_or_default();
+        all.sort_by(f32::total_cmp);
+        let worst_frame = per_frame
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(b.1))
+            .map_or(0, |(f, _)| f);
+        Reconstruction {
+            frames: data.len(),
+            mean_mm: 1e3 * all.iter().map(|&x| x as f64).sum::<f64>() / all.len().max(1) as f64,
+            p99_mm: 1e3 * crate::metrics::percentile(&all, 0.99),
+            max_mm: 1e3 * all.last().copied().unwrap_or(0.0) as f64,
+            worst_frame,
+        }
+    }
+
+    fn adam_params(&self) -> Vec<(String, Tensor)> {
+        self.space().parameters()
+    }
+}
+
+impl Training for SpaceTrainer {
+    type Record = DynamicEpoch;
+
+    fn epochs_done(&self) -> usize {
+        self.info().history.len()
+    }
+
+    fn run_epoch(&mut self) -> Result<DynamicEpoch, Blowup> {
+        let epoch = self.epochs_done();
+        // Each epoch's randomness from (seed, epoch): a resumed run draws the same.
+        tch::manual_seed(
+            (self.settings.seed as i64)
+                .wrapping_mul(1_000_003)
+                .wrapping_add(epoch as i64),
+        );
+        let lr = self.learning_rate(epoch);
+        let n = self.data.len() as i64;
+        let order = Tensor::randperm(n, (Kind::Int64, self.settings.device));
+        let batch = self.settings.batch as i64;
+        let mut sum = SpaceTerms::default();
+        let (mut err, mut steps) = (0.0, 0usize);
+        for (step, start) in (0..n).step_by(batch as usize).enumerate() {
+            let idx = order.narrow(0, start, batch.min(n - start));
+            let (t, e) = self.step(&idx, lr);
+            Blowup::check(
+                &[
+                    ("positions", t.positions),
+                    ("laplacian", t.laplacian),
+                    ("random edges", t.random_edges),
+                    ("sdf", t.sdf),
+                    ("latent", t.latent),
+                ],
+                epoch,
+                step,
+            )?;
+            sum.positions += t.positions;
+            sum.laplacian += t.laplacian;
+            sum.random_edges += t.random_edges;
+            sum.sdf += t.sdf;
+            sum.latent += t.latent;
+            err += e;
+            steps += 1;
+        }
+        let k = steps.max(1) as f64;
+        let terms = SpaceTerms {
+            positions: sum.positions / k,
+            laplacian: sum.laplacian / k,
+            random_edges: sum.random_edges / k,
+            sdf: sum.sdf / k,
+            latent: sum.latent / k,
+        };
+        let record = DynamicEpoch {
+            epoch: epoch + 1,
+            loss: terms.total(),
+            terms,
+            learning_rate: lr,
+            train_mean_mm: 1e3 * err / k,
+        };
+        let radii = self.space().radii();
+        let info = self.info_mut();
+        info.history.push(record.clone());
+        info.training.epochs = info.history.len();
+        info.radii = radii;
+        Ok(record)
+    }
+
+    fn save(&mut self, path: &Path, checkpoint: bool) -> Result<()> {
+        self.file.extra = if checkpoint {
+            let p = self.adam_params();
+            self.adam
+                .state(&p.iter().map(|(n, t)| (n.clone(), t)).collect::<Vec<_>>())
+        } else {
+            Vec::new()
+        };
+        file::save(path, &self.file)
+    }
+
+    fn resume(&mut self, path: &Path) -> Result<()> {
+        let checkpoint = file::load(path, self.settings.device)?;
+        let theirs = checkpoint.info.dynamic()?;
+        let mine = self.info();
+        if theirs.shape != mine.shape
+            || theirs.seeds != mine.seeds
+            || theirs.training.seed != mine.training.seed
+            || checkpoint.info.garment.rest_hash != self.file.info.garment.rest_hash
+            || theirs.training.motions != mine.training.motions
+        {
+            bail!("{}: checkpoint was made with other inputs or settings (garment, clips, preset, seed); start without --resume", path.display());
+        }
+        let history = theirs.history.clone();
+        let stored = checkpoint.dynamic()?.parameters();
+        let Model::Dynamic(space) = &mut self.file.model else {
+            unreachable!("a dynamic trainer holds a dynamic model")
+        };
+        space.load_parameters(&stored)?;
+        let p = self.adam_params();
+        self.adam.restore(
+            &p.iter().map(|(n, t)| (n.clone(), t)).collect::<Vec<_>>(),
+            &checkpoint.extra,
+        )?;
+        let info = self.info_mut();
+        info.training.epochs = history.len();
+        info.history = history;
+        Ok(())
+    }
+
+    fn describe(r: &DynamicEpoch) -> String {
+        format!("loss {:.4} mean {:.1} mm", r.loss, r.train_mean_mm)
+    }
+}
