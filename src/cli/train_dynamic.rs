@@ -158,6 +158,12 @@ impl Execute for Args {
         let device = self.compute.apply()?;
         let body = read_body(&self.body)?;
         let garment = Garment::read(&self.garment)?;
+        // The UV layout first: a garment without one fails before any cache is read.
+        crate::models::dynamic::UvRaster::new(
+            &garment.mesh,
+            8,
+            &self.garment.display().to_string(),
+        )?;
         let fabric = Fabric::load(&self.config)?;
         let n = garment.mesh.vertex_count();
         let train = sequences(

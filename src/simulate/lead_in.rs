@@ -1,4 +1,7 @@
-//! The frames before a clip: rest pose held, then a smooth blend into the clip's first pose.
+//! The frames before a clip: rest pose held where the clip starts, then a smooth blend into the
+//! clip's first pose. The root stays at the clip's first position throughout: blending it from
+//! the origin would slide the body metres in a second (131_01 starts 1.8 m away) and fling
+//! the garment before frame 0.
 
 use crate::rig::{JointTransform, Skeleton};
 
@@ -10,7 +13,13 @@ pub fn poses(
     hold: usize,
     blend: usize,
 ) -> Vec<Vec<JointTransform>> {
-    let rest = &skeleton.rest;
+    let mut rest = skeleton.rest.clone();
+    for (j, parent) in skeleton.parents.iter().enumerate() {
+        if parent.is_none() {
+            rest[j].translation = first[j].translation;
+        }
+    }
+    let rest = &rest;
     let mut out = vec![rest.clone(); hold];
     for k in 0..blend {
         let t = k as f32 / blend as f32;
@@ -49,10 +58,14 @@ mod tests {
         first.rotation = UnitQuaternion::from_euler_angles(0.0, 1.0, 0.0);
         let p = poses(&skeleton, &[first], 2, 4);
         assert_eq!(p.len(), 6);
-        assert_eq!(p[1][0].translation.x, 0.0);
-        let xs: Vec<f32> = p[2..].iter().map(|f| f[0].translation.x).collect();
-        assert_eq!(xs[0], 0.0);
-        assert!(xs.windows(2).all(|w| w[1] > w[0]) && xs[3] < 1.0, "{xs:?}");
+        // The root waits where the clip starts, in the rest orientation.
+        assert!(p.iter().all(|f| f[0].translation.x == 1.0));
+        assert_eq!(p[1][0].rotation.angle(), 0.0);
+        let angles: Vec<f32> = p[2..].iter().map(|f| f[0].rotation.angle()).collect();
+        assert!(
+            angles.windows(2).all(|w| w[1] > w[0]) && angles[3] < 1.0,
+            "{angles:?}"
+        );
         // Halfway in time is halfway in angle (smoothstep is symmetric).
         let angle = p[4][0].rotation.angle();
         assert!((angle - 0.5).abs() < 1e-4, "{angle}");

@@ -1,0 +1,214 @@
+//! `train-dynamic --stage space` on a short simulation of the sample skirt: it learns (the
+//! reconstruction error falls), the same seed gives the same bytes, --resume continues the
+//! checkpoint's history, and bad inputs fail with one line and write nothing.
+
+use crate::common::*;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn blender_skipped() -> bool {
+    let skip = std::env::var_os("GARMENTBAKE_SKIP_BLENDER").is_some();
+    if skip {
+        eprintln!(
+            "GARMENTBAKE_SKIP_BLENDER set: skipping (the training data is a Blender simulation)"
+        );
+    }
+    skip
+}
+
+fn run(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_garmentbake"))
+        .current_dir(root())
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+/// Six simulated frames of the skirt on 131_01 (shared cache: simulated once per checkout).
+fn short_sim(dir: &Path) -> PathBuf {
+    let out = dir.join("skirt_sim.pc2");
+    let cache = root().join("target/test-out/sim-cache");
+    let o = run(&[
+        "simulate",
+        "--body",
+        "samples/body.glb",
+        "--garment",
+        "samples/garments/skirt.obj",
+        "--motion",
+        "samples/motions/131_01.bvh",
+        "--fps",
+        "30",
+        "--frames",
+        "6",
+        "--settle",
+        "0.1",
+        "--blend",
+        "0.2",
+        "--cache",
+        cache.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    out
+}
+
+fn train(sim: &Path, out: &Path, epochs: &str, extra: &[&str]) -> serde_json::Value {
+    let mut args = vec![
+        "train-dynamic",
+        "--body",
+        "samples/body.glb",
+        "--garment",
+        "samples/garments/skirt.obj",
+        "--motion",
+        "samples/motions/131_01.bvh",
+        "--sim",
+        sim.to_str().unwrap(),
+        "--fps",
+        "30",
+        "--epochs",
+        epochs,
+        "--batch",
+        "2",
+        "--lr",
+        "2e-3",
+        "--threads",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ];
+    args.extend_from_slice(extra);
+    let o = run(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    serde_json::from_slice(&o.stdout).unwrap()
+}
+
+#[test]
+fn the_space_learns_is_deterministic_and_resumes_exactly() {
+    if blender_skipped() {
+        return;
+    }
+    let dir = out_dir("dyn_space");
+    let sim = short_sim(&dir);
+    let untrained = train(&sim, &dir.join("e0.safetensors"), "0", &[]);
+    let a = dir.join("a.safetensors");
+    let trained = train(&sim, &a, "20", &[]);
+    let before = untrained["train"]["mean_mm"].as_f64().unwrap();
+    let after = trained["train"]["mean_mm"].as_f64().unwrap();
+    assert!(
+        after < 0.85 * before,
+        "reconstruction {before:.1} mm → {after:.1} mm after 20 epochs"
+    );
+    assert_eq!(trained["frames"], 6);
+    let b = dir.join("b.safetensors");
+    train(&sim, &b, "20", &[]);
+    assert!(
+        std::fs::read(&a).unwrap() == std::fs::read(&b).unwrap(),
+        "same seed, different bytes"
+    );
+    // Resume extends a run (the learning-rate schedule spans the new --epochs): the first 12
+    // epochs are the checkpoint's, the history goes on to 20.
+    let c = dir.join("c.safetensors");
+    train(&sim, &c, "12", &[]);
+    let history = |p: &Path| {
+        let o = run(&["inspect", p.to_str().unwrap(), "--json"]);
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        v["description"]["model"]["history"]
+            .as_array()
+            .unwrap()
+            .clone()
+    };
+    let first = history(&c);
+    train(&sim, &c, "20", &["--resume"]);
+    let all = history(&c);
+    assert_eq!((first.len(), all.len()), (12, 20));
+    assert!(
+        all[..12] == first[..],
+        "resume rewrote the checkpoint's history"
+    );
+    let o = run(&["inspect", a.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains("kind: dynamic") && text.contains("kernel_radius_mm"),
+        "{text}"
+    );
+}
+
+#[test]
+fn bad_inputs_name_the_file_and_write_nothing() {
+    if blender_skipped() {
+        return;
+    }
+    let dir = out_dir("dyn_bad");
+    let sim = short_sim(&dir);
+    let out = dir.join("m.safetensors");
+    let fails = |garment: &str, sim: &Path| {
+        let o = run(&[
+            "train-dynamic",
+            "--body",
+            "samples/body.glb",
+            "--garment",
+            garment,
+            "--motion",
+            "samples/motions/131_01.bvh",
+            "--sim",
+            sim.to_str().unwrap(),
+            "--fps",
+            "30",
+            "--epochs",
+            "1",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        assert_eq!(
+            err.lines().filter(|l| !l.trim().is_empty()).count(),
+            1,
+            "{err}"
+        );
+        assert!(!out.exists(), "nothing written");
+        err
+    };
+    let err = fails("samples/garments/shirt.obj", &sim);
+    assert!(err.contains("shirt.obj has no UVs"), "{err}");
+    let body_cache = dir.join("body.pc2");
+    let o = run(&[
+        "simulate",
+        "--body",
+        "samples/body.glb",
+        "--garment",
+        "samples/garments/skirt.obj",
+        "--motion",
+        "samples/motions/131_01.bvh",
+        "--fps",
+        "30",
+        "--frames",
+        "6",
+        "--settle",
+        "0.1",
+        "--blend",
+        "0.2",
+        "--cache",
+        root().join("target/test-out/sim-cache").to_str().unwrap(),
+        "--out",
+        dir.join("again.pc2").to_str().unwrap(),
+        "--body-out",
+        body_cache.to_str().unwrap(),
+    ]);
+    assert!(o.status.success());
+    let err = fails("samples/garments/skirt.obj", &body_cache);
+    assert!(
+        err.contains("body.pc2") && err.contains("the garment has 2808 vertices"),
+        "{err}"
+    );
+    let bytes = std::fs::read(&sim).unwrap();
+    let cut = dir.join("cut.pc2");
+    std::fs::write(&cut, &bytes[..bytes.len() - 100]).unwrap();
+    let err = fails("samples/garments/skirt.obj", &cut);
+    assert!(
+        err.contains("cut.pc2") && err.contains("the header announces"),
+        "{err}"
+    );
+}
