@@ -22,6 +22,19 @@ pub struct ClipArgs {
 }
 
 impl ClipArgs {
+    /// The one clip of a command that reads exactly one, retargeted onto `skeleton` at --fps.
+    pub fn load_single(
+        &self,
+        skeleton: &crate::rig::Skeleton,
+    ) -> Result<(&Path, crate::rig::retarget::Retargeted)> {
+        let motion = self.single()?;
+        let maps = crate::motion::read_maps(&self.maps)?;
+        Ok((
+            motion,
+            crate::motion::load_clip(motion, &maps, skeleton, self.fps)?,
+        ))
+    }
+
     /// The one clip of a command that reads exactly one.
     pub fn single(&self) -> Result<&Path> {
         match self.motions.as_slice() {

@@ -7,7 +7,6 @@ use crate::eval::{compare, lbs_frames, model_frames};
 use crate::io::gltf_body::read_body;
 use crate::metrics::{body_edges_under, ClothGeometry, Inside, Metrics};
 use crate::models::file::check_skeleton;
-use crate::motion::{load_clip, read_maps};
 use anyhow::Result;
 use serde::Serialize;
 use std::path::PathBuf;
@@ -99,13 +98,7 @@ impl Execute for Args {
             }
             None => model.body.clone(),
         };
-        let motion = self.clips.single()?;
-        let clip = load_clip(
-            motion,
-            &read_maps(&self.clips.maps)?,
-            &body.skeleton,
-            self.clips.fps,
-        )?;
+        let (motion, clip) = self.clips.load_single(&body.skeleton)?;
         let anim = &clip.animation;
         let poses: Vec<_> = (0..anim.frame_count())
             .map(|f| anim.local_pose(f))

@@ -5,7 +5,6 @@ use super::Execute;
 use crate::fabric::Fabric;
 use crate::garment::Garment;
 use crate::io::gltf_body::read_body;
-use crate::motion::{load_clip, read_maps};
 use crate::simulate::{self, cache, stats, Scene, Settings};
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
@@ -134,13 +133,7 @@ impl Execute for Args {
             bail!("{}: {p}", self.garment.display());
         }
         let fabric = Fabric::load(&self.config)?;
-        let motion = self.clips.single()?;
-        let clip = load_clip(
-            motion,
-            &read_maps(&self.clips.maps)?,
-            &body.skeleton,
-            self.clips.fps,
-        )?;
+        let (motion, clip) = self.clips.load_single(&body.skeleton)?;
         let mut settings = self.settings()?;
         settings.blender = simulate::blender::find(self.blender.as_deref())?;
         let scene = Scene {

@@ -190,7 +190,6 @@ impl Execute for Args {
         settings.learning_rate = self.lr;
         settings.seed = self.seed;
         settings.device = device;
-        let body_for_eval = body.clone();
         let mut trainer = SpaceTrainer::new(body, garment, fabric, &train, settings)?;
         let frames = trainer.data.len();
         say(&format!(
@@ -216,11 +215,12 @@ impl Execute for Args {
             .map(|s| {
                 let info = trainer.info();
                 let seeds = crate::models::dynamic::Seeds::from_vertices(
-                    &body_for_eval,
+                    &trainer.file.body,
                     &info.seeds,
                     &info.seed_parts,
                 )?;
-                let data = FrameData::new(&body_for_eval, &seeds, std::slice::from_ref(&s), device);
+                let data =
+                    FrameData::new(&trainer.file.body, &seeds, std::slice::from_ref(&s), device);
                 Ok::<_, anyhow::Error>((s.name.clone(), SpaceTrainer::measure(space, &data)))
             })
             .transpose()?;

@@ -193,3 +193,47 @@ pub fn unit_square() -> garmentbake::geometry::TriMesh {
         vec![[0, 2, 1], [1, 2, 3]],
     )
 }
+
+/// True (with a note) when GARMENTBAKE_SKIP_BLENDER is set: tests that need Blender return early.
+pub fn blender_skipped() -> bool {
+    let skip = std::env::var_os("GARMENTBAKE_SKIP_BLENDER").is_some();
+    if skip {
+        eprintln!("GARMENTBAKE_SKIP_BLENDER set: skipping a test that runs Blender");
+    }
+    skip
+}
+
+/// Runs garmentbake in the repository root (so sample paths can be relative).
+pub fn garmentbake_in_root(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_garmentbake"))
+        .current_dir(root())
+        .args(args)
+        .output()
+        .expect("run garmentbake")
+}
+
+/// The one `error:` line of a bad-input failure (exit code 2), checking `out` was not written.
+pub fn one_error_line(output: &Output, out: &Path) -> String {
+    let err = String::from_utf8_lossy(&output.stderr).into_owned();
+    assert_eq!(output.status.code(), Some(2), "{err}");
+    assert_eq!(
+        err.lines().filter(|l| !l.trim().is_empty()).count(),
+        1,
+        "{err}"
+    );
+    assert!(err.starts_with("error: "), "{err}");
+    assert!(!out.exists(), "nothing written on failure");
+    err
+}
+
+/// Runs garmentbake in the repository root with `--json` among `args`; panics with its stderr
+/// unless it succeeds; returns the report.
+pub fn garmentbake_json(args: &[&str]) -> serde_json::Value {
+    let out = garmentbake_in_root(args);
+    assert!(
+        out.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("a JSON report")
+}

@@ -4,31 +4,12 @@
 
 use crate::common::*;
 use std::path::{Path, PathBuf};
-use std::process::Command;
-
-fn blender_skipped() -> bool {
-    let skip = std::env::var_os("GARMENTBAKE_SKIP_BLENDER").is_some();
-    if skip {
-        eprintln!(
-            "GARMENTBAKE_SKIP_BLENDER set: skipping (the training data is a Blender simulation)"
-        );
-    }
-    skip
-}
-
-fn run(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_garmentbake"))
-        .current_dir(root())
-        .args(args)
-        .output()
-        .unwrap()
-}
 
 /// Six simulated frames of the skirt on 131_01 (shared cache: simulated once per checkout).
 fn short_sim(dir: &Path) -> PathBuf {
     let out = dir.join("skirt_sim.pc2");
     let cache = root().join("target/test-out/sim-cache");
-    let o = run(&[
+    let o = garmentbake_in_root(&[
         "simulate",
         "--body",
         "samples/body.glb",
@@ -79,9 +60,7 @@ fn train(sim: &Path, out: &Path, epochs: &str, extra: &[&str]) -> serde_json::Va
         "--json",
     ];
     args.extend_from_slice(extra);
-    let o = run(&args);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    serde_json::from_slice(&o.stdout).unwrap()
+    garmentbake_json(&args)
 }
 
 #[test]
@@ -112,7 +91,7 @@ fn the_space_learns_is_deterministic_and_resumes_exactly() {
     let c = dir.join("c.safetensors");
     train(&sim, &c, "12", &[]);
     let history = |p: &Path| {
-        let o = run(&["inspect", p.to_str().unwrap(), "--json"]);
+        let o = garmentbake_in_root(&["inspect", p.to_str().unwrap(), "--json"]);
         let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
         v["description"]["model"]["history"]
             .as_array()
@@ -127,7 +106,7 @@ fn the_space_learns_is_deterministic_and_resumes_exactly() {
         all[..12] == first[..],
         "resume rewrote the checkpoint's history"
     );
-    let o = run(&["inspect", a.to_str().unwrap()]);
+    let o = garmentbake_in_root(&["inspect", a.to_str().unwrap()]);
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(
         text.contains("kind: dynamic") && text.contains("kernel_radius_mm"),
@@ -144,7 +123,7 @@ fn bad_inputs_name_the_file_and_write_nothing() {
     let sim = short_sim(&dir);
     let out = dir.join("m.safetensors");
     let fails = |garment: &str, sim: &Path| {
-        let o = run(&[
+        let o = garmentbake_in_root(&[
             "train-dynamic",
             "--body",
             "samples/body.glb",
@@ -161,20 +140,12 @@ fn bad_inputs_name_the_file_and_write_nothing() {
             "--out",
             out.to_str().unwrap(),
         ]);
-        let err = String::from_utf8_lossy(&o.stderr).into_owned();
-        assert_eq!(o.status.code(), Some(2), "{err}");
-        assert_eq!(
-            err.lines().filter(|l| !l.trim().is_empty()).count(),
-            1,
-            "{err}"
-        );
-        assert!(!out.exists(), "nothing written");
-        err
+        one_error_line(&o, &out)
     };
     let err = fails("samples/garments/shirt.obj", &sim);
     assert!(err.contains("shirt.obj has no UVs"), "{err}");
     let body_cache = dir.join("body.pc2");
-    let o = run(&[
+    let o = garmentbake_in_root(&[
         "simulate",
         "--body",
         "samples/body.glb",

@@ -8,14 +8,6 @@ use garmentbake::geometry::{SurfaceIndex, TriMesh};
 use garmentbake::io::obj::write_obj;
 use std::path::{Path, PathBuf};
 
-fn blender_skipped() -> bool {
-    let skip = std::env::var_os("GARMENTBAKE_SKIP_BLENDER").is_some();
-    if skip {
-        eprintln!("GARMENTBAKE_SKIP_BLENDER set: skipping a Blender simulation");
-    }
-    skip
-}
-
 /// The skirt's top 8 cm (its waist band and hips, pins kept): a small garment that touches
 /// the body everywhere.
 fn waist_band(dir: &Path) -> PathBuf {
@@ -81,17 +73,7 @@ fn simulate(garment: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
         "--json",
     ];
     args.extend_from_slice(extra);
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_garmentbake"))
-        .current_dir(root())
-        .args(&args)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).unwrap()
+    garmentbake_json(&args)
 }
 
 #[test]
@@ -237,17 +219,7 @@ fn a_free_patch_falls_half_g_t_squared_along_minus_y_at_any_frame_rate() {
             ];
             args.push("--threads");
             args.push("1");
-            let out = std::process::Command::new(env!("CARGO_BIN_EXE_garmentbake"))
-                .current_dir(root())
-                .args(&args)
-                .output()
-                .unwrap();
-            assert!(
-                out.status.success(),
-                "{}",
-                String::from_utf8_lossy(&out.stderr)
-            );
-            serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()
+            garmentbake_json(&args)
         };
         assert_eq!(report["lead_in_frames"], 0);
         let frames = garmentbake::io::point_cache::read_pc2(&pc2, 36).unwrap();
@@ -295,20 +267,8 @@ fn failures_name_their_cause_and_write_nothing() {
             "--no-cache",
         ];
         args.extend_from_slice(extra);
-        let o = std::process::Command::new(env!("CARGO_BIN_EXE_garmentbake"))
-            .current_dir(root())
-            .args(&args)
-            .output()
-            .unwrap();
-        let err = String::from_utf8_lossy(&o.stderr).into_owned();
-        assert_eq!(o.status.code(), Some(2), "{err}");
-        assert_eq!(
-            err.lines().filter(|l| !l.trim().is_empty()).count(),
-            1,
-            "{err}"
-        );
-        assert!(!out.exists(), "nothing written");
-        err
+        let o = garmentbake_in_root(&args);
+        one_error_line(&o, &out)
     };
     // A falling patch passes 0.5 m/s between frames 2 and 3: taken for an explosion.
     let err = run(&["--speed-limit", "0.5"], &obj);
