@@ -48,16 +48,20 @@ pub struct Args {
     /// Network size: cpu (64² map, 128 seeds, ≤ 256 channels) or paper (128², 581, 1024: a GPU).
     #[arg(long, default_value = "cpu")]
     pub preset: String,
+    /// Latent size (the preset's 64 when not given): the linear path starts as this many
+    /// principal components of the training frames.
+    #[arg(long)]
+    pub latent: Option<usize>,
     /// Fabric the simulations used (recorded in the model).
     #[arg(long, default_value = "cotton")]
     pub config: String,
-    #[arg(long, default_value_t = 60)]
+    #[arg(long, default_value_t = 30)]
     pub epochs: usize,
     /// Frames per optimisation step.
     #[arg(long, default_value_t = 4)]
     pub batch: usize,
     /// Initial Adam learning rate (cosine decay to a tenth).
-    #[arg(long, default_value_t = 5e-4)]
+    #[arg(long, default_value_t = 3e-4)]
     pub lr: f64,
     /// Seed: same seed and inputs → the same model.
     #[arg(long, default_value_t = 0)]
@@ -184,7 +188,9 @@ impl Execute for Args {
             .pop(),
             _ => None,
         };
-        let mut settings = Settings::new(SpaceShape::preset(&self.preset)?);
+        let mut shape = SpaceShape::preset(&self.preset)?;
+        shape.latent = self.latent.unwrap_or(shape.latent);
+        let mut settings = Settings::new(shape);
         settings.epochs = self.epochs;
         settings.batch = self.batch;
         settings.learning_rate = self.lr;

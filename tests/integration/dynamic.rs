@@ -1,6 +1,8 @@
-//! `train-dynamic --stage space` on a short simulation of the sample skirt: it learns (the
-//! reconstruction error falls), the same seed gives the same bytes, --resume continues the
-//! checkpoint's history, and bad inputs fail with one line and write nothing.
+//! `train-dynamic --stage space` on a short simulation of the sample skirt: the untrained space
+//! is the exact linear fit of its frames (unskinning inverts skinning), the networks learn what a
+//! one-dimensional linear path leaves (the reconstruction error falls), the same seed gives the
+//! same bytes, --resume continues the checkpoint's history, and bad inputs fail with one line and
+//! write nothing.
 
 use crate::common::*;
 use std::path::{Path, PathBuf};
@@ -52,7 +54,7 @@ fn train(sim: &Path, out: &Path, epochs: &str, extra: &[&str]) -> serde_json::Va
         "--batch",
         "2",
         "--lr",
-        "2e-3",
+        "1e-3",
         "--threads",
         "1",
         "--out",
@@ -70,26 +72,38 @@ fn the_space_learns_is_deterministic_and_resumes_exactly() {
     }
     let dir = out_dir("dyn_space");
     let sim = short_sim(&dir);
-    let untrained = train(&sim, &dir.join("e0.safetensors"), "0", &[]);
+    // Six frames span five directions around their mean: 64 principal components hold them
+    // exactly, so the untrained space must give them back (unskinning undone by skinning).
+    let exact = train(&sim, &dir.join("e0.safetensors"), "0", &[]);
+    let exact_mm = exact["train"]["max_mm"].as_f64().unwrap();
+    assert!(
+        exact_mm < 0.05,
+        "untrained 64-d space: {exact_mm:.3} mm off its own frames"
+    );
+    // One latent dimension leaves millimetres for the networks to learn.
+    let one = ["--latent", "1"];
+    let before = train(&sim, &dir.join("l0.safetensors"), "0", &one)["train"]["mean_mm"]
+        .as_f64()
+        .unwrap();
     let a = dir.join("a.safetensors");
-    let trained = train(&sim, &a, "20", &[]);
-    let before = untrained["train"]["mean_mm"].as_f64().unwrap();
+    let trained = train(&sim, &a, "60", &one);
     let after = trained["train"]["mean_mm"].as_f64().unwrap();
     assert!(
         after < 0.85 * before,
-        "reconstruction {before:.1} mm → {after:.1} mm after 20 epochs"
+        "reconstruction {before:.2} mm → {after:.2} mm after 60 epochs"
     );
     assert_eq!(trained["frames"], 6);
-    let b = dir.join("b.safetensors");
-    train(&sim, &b, "20", &[]);
+    let (b1, b2) = (dir.join("b1.safetensors"), dir.join("b2.safetensors"));
+    train(&sim, &b1, "6", &one);
+    train(&sim, &b2, "6", &one);
     assert!(
-        std::fs::read(&a).unwrap() == std::fs::read(&b).unwrap(),
+        std::fs::read(&b1).unwrap() == std::fs::read(&b2).unwrap(),
         "same seed, different bytes"
     );
-    // Resume extends a run (the learning-rate schedule spans the new --epochs): the first 12
-    // epochs are the checkpoint's, the history goes on to 20.
+    // Resume extends a run (the learning-rate schedule spans the new --epochs): the first 3
+    // epochs are the checkpoint's, the history goes on to 6.
     let c = dir.join("c.safetensors");
-    train(&sim, &c, "12", &[]);
+    train(&sim, &c, "3", &one);
     let history = |p: &Path| {
         let o = garmentbake_in_root(&["inspect", p.to_str().unwrap(), "--json"]);
         let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
@@ -99,11 +113,11 @@ fn the_space_learns_is_deterministic_and_resumes_exactly() {
             .clone()
     };
     let first = history(&c);
-    train(&sim, &c, "20", &["--resume"]);
+    train(&sim, &c, "6", &[&one[..], &["--resume"]].concat());
     let all = history(&c);
-    assert_eq!((first.len(), all.len()), (12, 20));
+    assert_eq!((first.len(), all.len()), (3, 6));
     assert!(
-        all[..12] == first[..],
+        all[..3] == first[..],
         "resume rewrote the checkpoint's history"
     );
     let o = garmentbake_in_root(&["inspect", a.to_str().unwrap()]);

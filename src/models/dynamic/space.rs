@@ -1,9 +1,14 @@
 //! The generative space: `S` (convolutions over the descriptor map) → `E_sta` → `Z` → `D` →
 //! feature map `ξ` → per-vertex MLP `R(ξ_i, u_i)` → displacement `d_i` in the vertex's rest frame
 //! `H0_i` → `ĝ_i = g0_i + H0_i d_i` → skinned by the seeds:
-//! `g_i = Σ_j w_ij M_j ĝ_i`, `w_ij = softmax_j(−|ĝ_i − b0_j|² / 2ρ²_part(j))`.
-//! Deviation from the paper: no instance norm (the 2×2 and 4×4 maps of the bottleneck have too
-//! few texels for per-map statistics); LeakyReLU(0.2) everywhere.
+//! `g_i = Σ_j w_ij M_j ĝ_i`, `w_ij = softmax_j(−|g0_i − b0_j|² / 2ρ²_part(j))`.
+//! Deviations from the paper, each for trainability on a laptop in minutes rather than 350 GPU
+//! epochs: the kernel weights are taken at the rest garment `g0` (not at `ĝ`), so skinning can be
+//! inverted; a linear path beside the networks (`Z += P(d* − μ)`, `d += μ + B Z`) starts as the
+//! principal components of the training frames' unskinned displacements `d*`, so the untrained
+//! space is already the best linear fit and the networks learn the rest (both are trained).
+//! No instance norm (the 2×2 and 4×4 maps of the bottleneck have too few texels for per-map
+//! statistics); LeakyReLU(0.2) everywhere.
 
 use super::seeds::{Seeds, PARTS};
 use super::uv::UvRaster;
@@ -69,6 +74,9 @@ impl SpaceShape {
                 self.map,
                 self.encoder.len()
             );
+        }
+        if self.latent == 0 {
+            bail!("--latent 0: the space needs at least one latent dimension");
         }
         Ok(())
     }
@@ -171,6 +179,11 @@ pub struct Space {
     r: nn::Sequential,
     /// ln ρ per body part ([`PARTS`]).
     pub log_radius: Tensor,
+    /// The linear path (see [`Space::init_linear`]): mean rest-frame displacement `[3V]`, the
+    /// encoder's projection `[L, 3V]` and the decoder's basis `[L, 3V]`.
+    linear_mean: Tensor,
+    linear_encode: Tensor,
+    linear_decode: Tensor,
     pub consts: Consts,
 }
 
@@ -241,7 +254,13 @@ impl Space {
         }
         let bottleneck = c * 4;
         let latent = shape.latent as i64;
-        let encoder_fc = nn::linear(&root / "enc_fc", bottleneck, latent, Default::default());
+        // Zero: the untrained encoder is the linear path alone.
+        let zero_linear = nn::LinearConfig {
+            ws_init: nn::Init::Const(0.0),
+            bs_init: Some(nn::Init::Const(0.0)),
+            bias: true,
+        };
+        let encoder_fc = nn::linear(&root / "enc_fc", bottleneck, latent, zero_linear);
         let decoder_fc = nn::linear(&root / "dec_fc", latent, bottleneck, Default::default());
         let mut decoder = nn::seq();
         let outs: Vec<i64> = shape
@@ -266,11 +285,7 @@ impl Space {
             let o = if last { 3 } else { shape.mlp as i64 };
             // The last layer starts at zero: the untrained space is plain seed skinning of the rest garment.
             let config = if last {
-                nn::LinearConfig {
-                    ws_init: nn::Init::Const(0.0),
-                    bs_init: Some(nn::Init::Const(0.0)),
-                    bias: true,
-                }
+                zero_linear
             } else {
                 Default::default()
             };
@@ -285,6 +300,11 @@ impl Space {
             &[PARTS.len() as i64],
             nn::Init::Const(RADIUS0.ln()),
         );
+        let dof = 3 * consts.rest.size()[0];
+        let zero = nn::Init::Const(0.0);
+        let linear_mean = root.var("linear_mean", &[dof], zero);
+        let linear_encode = root.var("linear_encode", &[latent, dof], zero);
+        let linear_decode = root.var("linear_decode", &[latent, dof], zero);
         Ok(Space {
             vs,
             shape,
@@ -297,6 +317,9 @@ impl Space {
             decoder,
             r,
             log_radius,
+            linear_mean,
+            linear_encode,
+            linear_decode,
             consts,
         })
     }
@@ -327,9 +350,52 @@ impl Space {
         map + mask + self.s0_bias.reshape([1, c, 1, 1])
     }
 
-    /// `Z [B, L]` of garments `g` with seeds at `b`: `E_sta(S(M^P))`.
-    pub fn encode(&self, g: &Tensor, b: &Tensor) -> Tensor {
-        self.encode_features(&self.static_features(g, b))
+    /// `Z [B, L]` of garments `g` with seeds at `b` and seed transforms `m`:
+    /// `E_sta(S(M^P))` plus the linear path's projection of the unskinned displacements.
+    pub fn encode(&self, g: &Tensor, b: &Tensor, m: &Tensor) -> Tensor {
+        let linear =
+            (self.rest_displacements(g, m) - &self.linear_mean).matmul(&self.linear_encode.tr());
+        self.encode_features(&self.static_features(g, b)) + linear
+    }
+
+    /// Garments `g [B, V, 3]` unskinned by seed transforms `m` (each vertex's blended transform
+    /// inverted) and expressed as displacements in the vertices' rest frames, `[B, 3V]`: what
+    /// [`Space::canonical`] would have to output to reproduce `g` exactly.
+    pub fn rest_displacements(&self, g: &Tensor, m: &Tensor) -> Tensor {
+        let (rot, shift) = self.blended(m);
+        let local = rot
+            .inverse()
+            .matmul(&(g - shift).unsqueeze(3))
+            .squeeze_dim(3);
+        let k = &self.consts;
+        Tensor::einsum(
+            "vkc,bvc->bvk",
+            &[k.frames.shallow_clone(), local - &k.rest],
+            None::<i64>,
+        )
+        .flatten(1, 2)
+    }
+
+    /// Sets the linear path to the principal components of rest-frame displacements `d [F, 3V]`
+    /// (from [`Space::rest_displacements`] of the training frames), scaled so that the latents
+    /// of the training frames have unit variance: the untrained space is then the best linear
+    /// `L`-dimensional fit of its training set, and the networks learn what is left.
+    pub fn init_linear(&mut self, d: &Tensor) {
+        tch::no_grad(|| {
+            let mean = d.mean_dim(0, false, Kind::Float);
+            let centred = d - &mean;
+            let (_, singular, v) = centred.svd(true, true);
+            let vh = v.tr();
+            let l = self.linear_encode.size()[0].min(vh.size()[0]);
+            let frames = d.size()[0].max(1) as f64;
+            let sigma = (singular.narrow(0, 0, l) / frames.sqrt())
+                .clamp_min(1e-6)
+                .unsqueeze(1);
+            let basis = vh.narrow(0, 0, l);
+            self.linear_mean.copy_(&mean);
+            self.linear_encode.narrow(0, 0, l).copy_(&(&basis / &sigma));
+            self.linear_decode.narrow(0, 0, l).copy_(&(&basis * &sigma));
+        });
     }
 
     /// `S(M^P)`: the static feature map (the dynamic stage reuses it).
@@ -364,29 +430,48 @@ impl Space {
             &[per_vertex, k.uv.unsqueeze(0).expand([bs, v, 2], false)],
             2,
         );
-        let d = self.r.forward(&input) * DISPLACEMENT_SCALE;
+        let linear = (z.matmul(&self.linear_decode) + &self.linear_mean).reshape([bs, v, 3]);
+        self.displaced(&(self.r.forward(&input) * DISPLACEMENT_SCALE + linear))
+    }
+
+    /// The rest garment moved by rest-frame displacements `d [B, V, 3]` (or `[B, 3V]`).
+    pub fn displaced(&self, d: &Tensor) -> Tensor {
+        let k = &self.consts;
+        let d = d.reshape([d.size()[0], -1, 3]);
         &k.rest + Tensor::einsum("bvk,vkc->bvc", &[d, k.frames.shallow_clone()], None::<i64>)
     }
 
-    /// Skins canonical garments by the seeds' transforms `m [B, N, 12]` (row-major 3×4).
-    pub fn skin(&self, canonical: &Tensor, m: &Tensor) -> Tensor {
+    /// Each vertex's seed-blended transform under seed transforms `m [B, N, 12]` (row-major
+    /// 3×4): rotation part `[B, V, 3, 3]` and translation `[B, V, 3]`. The weights are
+    /// `softmax_j(−|g0_i − b0_j|² / 2ρ²_part(j))` at the REST garment `g0` (the paper evaluates
+    /// them at the decoded `ĝ`): fixed weights make the skinning invertible per vertex, which
+    /// [`Space::rest_displacements`] needs.
+    fn blended(&self, m: &Tensor) -> (Tensor, Tensor) {
         let k = &self.consts;
-        let d2 = (canonical.unsqueeze(2) - k.seed_rest.unsqueeze(0).unsqueeze(0))
+        let d2 = (k.rest.unsqueeze(1) - k.seed_rest.unsqueeze(0))
             .square()
-            .sum_dim_intlist(3, false, Kind::Float);
+            .sum_dim_intlist(2, false, Kind::Float);
         let rho2 = (self.log_radius.index_select(0, &k.seed_part) * 2.0).exp();
-        let w = (-d2 / (rho2 * 2.0)).softmax(2, Kind::Float);
-        let (bs, v) = (canonical.size()[0], canonical.size()[1]);
-        let a = w.bmm(m).reshape([bs, v, 3, 4]);
-        let rot = a.narrow(3, 0, 3);
-        let shift = a.select(3, 3);
+        let w = (-d2 / (rho2 * 2.0)).softmax(1, Kind::Float);
+        let (bs, v) = (m.size()[0], k.rest.size()[0]);
+        let a = w
+            .unsqueeze(0)
+            .expand([bs, v, -1], false)
+            .bmm(m)
+            .reshape([bs, v, 3, 4]);
+        (a.narrow(3, 0, 3), a.select(3, 3))
+    }
+
+    /// Skins canonical garments `[B, V, 3]` by the seeds' transforms `m [B, N, 12]`.
+    pub fn skin(&self, canonical: &Tensor, m: &Tensor) -> Tensor {
+        let (rot, shift) = self.blended(m);
         rot.matmul(&canonical.unsqueeze(3)).squeeze_dim(3) + shift
     }
 
     /// Encode → decode → skin: the space's reconstruction of garments `g` with seeds at `b`
     /// and seed transforms `m`; also returns `z` and the canonical garments.
     pub fn reconstruct(&self, g: &Tensor, b: &Tensor, m: &Tensor) -> (Tensor, Tensor, Tensor) {
-        let z = self.encode(g, b);
+        let z = self.encode(g, b, m);
         let canonical = self.canonical(&z);
         (self.skin(&canonical, m), z, canonical)
     }
@@ -519,5 +604,34 @@ mod tests {
         let shift = Tensor::from_slice(&[0.5f32, -0.25, 2.0]).reshape([1, 1, 3]);
         assert!((posed - rest - shift).abs().max().double_value(&[]) < 1e-6);
         assert_eq!(mesh.vertex_count(), 16);
+    }
+
+    #[test]
+    fn unskinning_inverts_skinning_and_the_linear_path_fits_its_frames() {
+        let (mut space, mesh) = small_space();
+        let v = mesh.vertex_count() as i64;
+        // Three frames: random seed transforms near identity, random garments.
+        let eye = Tensor::from_slice(&[1f32, 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0.]);
+        let m =
+            eye.reshape([1, 1, 12]) + Tensor::randn([3, 3, 12], (Kind::Float, Device::Cpu)) * 0.2;
+        let g = space.consts.rest.unsqueeze(0)
+            + Tensor::randn([3, v, 3], (Kind::Float, Device::Cpu)) * 0.05;
+        let d = space.rest_displacements(&g, &m);
+        let back = space.skin(&space.displaced(&d), &m);
+        let diff = (&back - &g).abs().max().double_value(&[]);
+        assert!(diff < 1e-4, "skin(unskin(g)) differs by {diff}");
+        // Three frames span two directions around their mean; 5 latents hold them exactly.
+        space.init_linear(&d);
+        let b = Tensor::zeros([3, 3, 3], (Kind::Float, Device::Cpu));
+        let (rebuilt, z, _) = space.reconstruct(&g, &b, &m);
+        let diff = (&rebuilt - &g).abs().max().double_value(&[]);
+        assert!(diff < 1e-4, "linear path misses its own frames by {diff}");
+        // The training latents have unit variance per used dimension.
+        let var: Vec<f32> = z
+            .narrow(1, 0, 2)
+            .var_dim(0, false, false)
+            .try_into()
+            .unwrap();
+        assert!(var.iter().all(|&x| (x - 1.0).abs() < 1e-3), "{var:?}");
     }
 }
