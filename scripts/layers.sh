@@ -17,7 +17,7 @@ LAYERS = [
     "motion garment",
     "metrics",
     "models",
-    "train eval simulate",
+    "train eval simulate rollout",
     "bake",
     "cli",
 ]

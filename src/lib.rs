@@ -11,7 +11,8 @@
 //! 5. `motion`, `garment` — clips loaded onto a skeleton; garments and their fitting
 //! 6. `metrics` — garment metrics of posed frames
 //! 7. `models` — the networks and the model file
-//! 8. `train`, `eval`, `simulate` — training; evaluation over clips; cloth-simulated ground truth
+//! 8. `train`, `eval`, `simulate`, `rollout` — training; evaluation over clips; cloth-simulated
+//!    ground truth; dynamic models rolled out frame by frame
 //! 9. `bake` — model output → the exporter-neutral baked asset (`exporters::asset`)
 //! 10. `cli` — one command per pipeline step
 
@@ -30,5 +31,6 @@ pub mod motion;
 pub mod preview;
 pub mod progress;
 pub mod rig;
+pub mod rollout;
 pub mod simulate;
 pub mod train;

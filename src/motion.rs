@@ -3,7 +3,7 @@
 use crate::io::bvh::Bvh;
 use crate::io::joint_map::{self, JointMap};
 use crate::rig::retarget::{retarget, Retargeted};
-use crate::rig::Skeleton;
+use crate::rig::{JointTransform, Skeleton};
 use anyhow::{bail, Result};
 use std::path::Path;
 
@@ -51,4 +51,34 @@ pub fn load_clip(
         clip.animation = clip.animation.subsampled(0, step.round() as usize);
     }
     Ok(clip)
+}
+
+/// Clips played one after another as one pose sequence: each clip after the first is moved
+/// on the ground so that its root starts where the previous clip's root ended (no jump), and its
+/// first `fade` frames blend from the previous clip's last pose (smoothstep; rotations slerped).
+/// All clips must share one frame rate.
+pub fn chain(clips: &[&crate::rig::SkelAnimation], fade: usize) -> Vec<Vec<JointTransform>> {
+    let mut poses: Vec<Vec<JointTransform>> = Vec::new();
+    for clip in clips {
+        let mut frames: Vec<Vec<JointTransform>> = (0..clip.frame_count())
+            .map(|f| clip.local_pose(f))
+            .collect();
+        if let (Some(last), Some(first)) = (poses.last().cloned(), frames.first().cloned()) {
+            let mut shift = last[0].translation - first[0].translation;
+            shift.y = 0.0;
+            for pose in &mut frames {
+                pose[0].translation += shift;
+            }
+            for (i, pose) in frames.iter_mut().take(fade).enumerate() {
+                let x = (i + 1) as f32 / (fade + 1) as f32;
+                let w = x * x * (3.0 - 2.0 * x);
+                for (j, from) in pose.iter_mut().zip(&last) {
+                    j.translation = from.translation.lerp(&j.translation, w);
+                    j.rotation = from.rotation.slerp(&j.rotation, w);
+                }
+            }
+        }
+        poses.extend(frames);
+    }
+    poses
 }

@@ -7,10 +7,12 @@ use crate::garment::Garment;
 use crate::io::gltf_body::read_body;
 use crate::io::point_cache::read_pc2;
 use crate::models::dynamic::SpaceShape;
-use crate::models::file::DynamicEpoch;
+use crate::models::dynamic::{MotionShape, Seeds};
+use crate::models::file::{DynamicEpoch, ModelFile, MotionEpoch};
 use crate::motion::{load_clip, read_maps};
 use crate::rig::Skeleton;
 use crate::train::dynamic::{FrameData, Reconstruction, Sequence, Settings, SpaceTrainer};
+use crate::train::motion::{one_step, MotionTrainer, Settings as MotionSettings};
 use crate::train::{fit, FitOptions, Fitted, Training};
 use anyhow::{bail, Result};
 use serde::Serialize;
@@ -18,25 +20,35 @@ use std::path::{Path, PathBuf};
 
 /// Train the dynamic garment model on cloth simulations (`garmentbake simulate`).
 ///
-/// Stage `space` (this build): the generative space of garment deformations. Each simulated
-/// frame is measured relative to body seed points, laid out in the garment's UV map, encoded to
-/// a 64-number latent and decoded to per-vertex displacements in each vertex's rest frame, then
+/// Two stages, one model file:
+///
+/// `--stage space` (first): the generative space of garment deformations. Each simulated frame
+/// is measured relative to body seed points, laid out in the garment's UV map, encoded to a
+/// 64-number latent and decoded to per-vertex displacements in each vertex's rest frame, then
 /// skinned by the seeds with distance weights whose kernel radius is learnt per body part. Loss:
 /// reconstruction (positions and Laplacians, L1), edge lengths of garments decoded from random
 /// latents, the exact signed distance to the rest body (hinge) and a latent regulariser. The
-/// garment needs UVs. The dynamic encoder and roll-out are the next stage, not built yet.
+/// garment needs UVs. Needs --body and --garment.
 ///
-/// Give each --motion its --sim cache (same order, same --fps as simulated). Judge the space with
+/// `--stage dynamic --from SPACE.safetensors` (second): the motion encoder, the space frozen.
+/// From the previous garment (its shape, velocity and acceleration) and the body's motion into
+/// the next frame it predicts the next frame's latent; trained on the simulated frames with the
+/// paper's virtual sample (no change in, no change out). Then `garmentbake rollout` plays it.
+///
+/// Give each --motion its --sim cache (same order, same --fps as simulated). Judge the model with
 /// --eval-motion/--eval-sim on a clip it never saw. A checkpoint is written next to --out every
 /// epoch; --resume continues from it.
 #[derive(clap::Args)]
 pub struct Args {
-    /// Skinned body (glTF/glb) the simulations used.
-    #[arg(long)]
-    pub body: PathBuf,
-    /// Garment mesh (OBJ with UVs) the simulations used.
-    #[arg(long)]
-    pub garment: PathBuf,
+    /// Skinned body (glTF/glb) the simulations used (stage space).
+    #[arg(long, required_if_eq("stage", "space"))]
+    pub body: Option<PathBuf>,
+    /// Garment mesh (OBJ with UVs) the simulations used (stage space).
+    #[arg(long, required_if_eq("stage", "space"))]
+    pub garment: Option<PathBuf>,
+    /// Stage dynamic: the model whose trained space the motion encoder builds on.
+    #[arg(long, required_if_eq("stage", "dynamic"))]
+    pub from: Option<PathBuf>,
     #[command(flatten)]
     pub clips: ClipArgs,
     /// The simulated garment of each --motion (.pc2 from `garmentbake simulate`), in order.
@@ -57,12 +69,15 @@ pub struct Args {
     pub config: String,
     #[arg(long, default_value_t = 30)]
     pub epochs: usize,
-    /// Frames per optimisation step.
-    #[arg(long, default_value_t = 4)]
-    pub batch: usize,
-    /// Initial Adam learning rate (cosine decay to a tenth).
-    #[arg(long, default_value_t = 3e-4)]
-    pub lr: f64,
+    /// Frames per optimisation step (space 4, dynamic 8).
+    #[arg(long)]
+    pub batch: Option<usize>,
+    /// Initial Adam learning rate, cosine decay to a tenth (space 3e-4, dynamic 1e-3).
+    #[arg(long)]
+    pub lr: Option<f64>,
+    /// Stage dynamic: channels of the motion features `E_t`.
+    #[arg(long, default_value_t = 16)]
+    pub motion_features: usize,
     /// Seed: same seed and inputs → the same model.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -94,16 +109,19 @@ pub enum StageArg {
 
 #[derive(Serialize)]
 pub struct Report {
+    pub stage: String,
     #[serde(flatten)]
     pub fitted: Fitted,
     pub frames: usize,
     /// Training frames processed per second of wall time.
     pub frames_per_second: f64,
+    /// Space: reconstructions; dynamic: one-step predictions from simulated histories.
     pub train: Reconstruction,
     pub eval: Option<(String, Reconstruction)>,
     /// Learnt kernel radius per body part (mm).
     pub radius_mm: Vec<(String, f64)>,
     pub last: Option<DynamicEpoch>,
+    pub last_motion: Option<MotionEpoch>,
 }
 
 /// Clips and their simulations, checked against each other.
@@ -156,17 +174,66 @@ impl Execute for Args {
     type Report = Report;
 
     fn execute(&self, say: &dyn Fn(&str)) -> Result<Report> {
-        if matches!(self.stage, StageArg::Dynamic) {
-            bail!("--stage dynamic (the dynamic encoder and roll-out) is not built yet; this build trains --stage space");
+        match self.stage {
+            StageArg::Space => self.train_space(say),
+            StageArg::Dynamic => self.train_motion(say),
         }
+    }
+
+    fn print(r: &Report) {
+        println!(
+            "trained {} epochs on {} frames in {:.0} s ({:.1} frames/s)",
+            r.fitted.epochs, r.frames, r.fitted.seconds, r.frames_per_second
+        );
+        println!(
+            "{}:",
+            if r.stage == "space" {
+                "reconstruction (vertex L2)"
+            } else {
+                "one-step prediction from simulated history (vertex L2)"
+            }
+        );
+        let row = |name: &str, x: &Reconstruction| {
+            println!("{name:<24} {:>6} frames   mean {:>6.2} mm   p99 {:>6.2} mm   max {:>6.2} mm (worst frame {})", x.frames, x.mean_mm, x.p99_mm, x.max_mm, x.worst_frame);
+        };
+        row("training frames", &r.train);
+        if let Some((name, e)) = &r.eval {
+            row(&format!("{name} (held out)"), e);
+        }
+        if let Some(m) = &r.last_motion {
+            println!(
+                "last epoch: loss {:.4} (geometry {:.5} m, virtual {:.5} m, latent {:.4}, virtual {:.4})",
+                m.loss,
+                m.terms.geometry,
+                m.terms.virtual_geometry,
+                m.terms.latent,
+                m.terms.virtual_latent
+            );
+        }
+        let radii: Vec<String> = r
+            .radius_mm
+            .iter()
+            .map(|(p, v)| format!("{p} {v:.1}"))
+            .collect();
+        println!("kernel radius per part (mm): {}", radii.join(", "));
+        println!("wrote {}", r.fitted.out.display());
+    }
+}
+
+impl Args {
+    /// Stage `space`: the generative space from the simulated clips.
+    fn train_space(&self, say: &dyn Fn(&str)) -> Result<Report> {
         let device = self.compute.apply()?;
-        let body = read_body(&self.body)?;
-        let garment = Garment::read(&self.garment)?;
+        let (Some(body_path), Some(garment_path)) = (&self.body, &self.garment) else {
+            bail!("--stage space needs --body and --garment");
+        };
+        let body = read_body(body_path)?;
+        let garment = Garment::read(garment_path)?;
         // The UV layout first: a garment without one fails before any cache is read.
         crate::models::dynamic::UvRaster::new(
             &garment.mesh,
             8,
-            &self.garment.display().to_string(),
+            &garment_path.display().to_string(),
         )?;
         let fabric = Fabric::load(&self.config)?;
         let n = garment.mesh.vertex_count();
@@ -177,23 +244,13 @@ impl Execute for Args {
             &body.skeleton,
             n,
         )?;
-        let eval = match (&self.eval_motion, &self.eval_sim) {
-            (Some(m), Some(s)) => sequences(
-                std::slice::from_ref(m),
-                std::slice::from_ref(s),
-                &self.clips,
-                &body.skeleton,
-                n,
-            )?
-            .pop(),
-            _ => None,
-        };
+        let eval = self.eval_sequence(&body.skeleton, n)?;
         let mut shape = SpaceShape::preset(&self.preset)?;
         shape.latent = self.latent.unwrap_or(shape.latent);
         let mut settings = Settings::new(shape);
         settings.epochs = self.epochs;
-        settings.batch = self.batch;
-        settings.learning_rate = self.lr;
+        settings.batch = self.batch.unwrap_or(settings.batch);
+        settings.learning_rate = self.lr.unwrap_or(settings.learning_rate);
         settings.seed = self.seed;
         settings.device = device;
         let mut trainer = SpaceTrainer::new(body, garment, fabric, &train, settings)?;
@@ -206,66 +263,143 @@ impl Execute for Args {
             trainer.resume(&crate::train::checkpoint_path(&self.out))?;
         }
         let done = trainer.epochs_done();
-        let fitted = fit(
-            &mut trainer,
-            &FitOptions {
-                epochs: self.epochs,
-                out: &self.out,
-                quiet: self.output.json,
-                log: self.log.as_deref(),
-            },
-        )?;
+        let fitted = fit(&mut trainer, &self.fit_options())?;
         let space = trainer.space();
         let train_err = SpaceTrainer::measure(space, &trainer.data);
         let eval = eval
             .map(|s| {
-                let info = trainer.info();
-                let seeds = crate::models::dynamic::Seeds::from_vertices(
-                    &trainer.file.body,
-                    &info.seeds,
-                    &info.seed_parts,
-                )?;
-                let data =
-                    FrameData::new(&trainer.file.body, &seeds, std::slice::from_ref(&s), device);
+                let data = self.frame_data(&trainer.file, &s, device)?;
                 Ok::<_, anyhow::Error>((s.name.clone(), SpaceTrainer::measure(space, &data)))
             })
             .transpose()?;
         let info = trainer.info();
         Ok(Report {
+            stage: "space".into(),
             frames,
             frames_per_second: (frames * (fitted.epochs - done)) as f64 / fitted.seconds.max(1e-9),
             train: train_err,
             eval,
-            radius_mm: info
-                .parts
-                .iter()
-                .cloned()
-                .zip(info.radii.iter().map(|r| r * 1e3))
-                .collect(),
+            radius_mm: radii_mm(info),
             last: info.history.last().cloned(),
+            last_motion: None,
             fitted,
         })
     }
 
-    fn print(r: &Report) {
-        println!(
-            "trained {} epochs on {} frames in {:.0} s ({:.1} frames/s)",
-            r.fitted.epochs, r.frames, r.fitted.seconds, r.frames_per_second
-        );
-        let row = |name: &str, x: &Reconstruction| {
-            println!("{name:<24} {:>6} frames   mean {:>6.2} mm   p99 {:>6.2} mm   max {:>6.2} mm (worst frame {})", x.frames, x.mean_mm, x.p99_mm, x.max_mm, x.worst_frame);
+    /// Stage `dynamic`: the motion encoder on the frozen space of `--from`.
+    fn train_motion(&self, say: &dyn Fn(&str)) -> Result<Report> {
+        let Some(from) = &self.from else {
+            bail!("--stage dynamic needs --from SPACE.safetensors (a model trained with --stage space)");
         };
-        println!("reconstruction (vertex L2):");
-        row("training frames", &r.train);
-        if let Some((name, e)) = &r.eval {
-            row(&format!("{name} (held out)"), e);
+        let (file, device) = self.compute.load_model(from)?;
+        let info = file.info.dynamic()?.clone();
+        if self.resume && !crate::train::checkpoint_path(&self.out).exists() {
+            bail!("--resume: no checkpoint next to {}", self.out.display());
         }
-        let radii: Vec<String> = r
-            .radius_mm
-            .iter()
-            .map(|(p, v)| format!("{p} {v:.1}"))
-            .collect();
-        println!("kernel radius per part (mm): {}", radii.join(", "));
-        println!("wrote {}", r.fitted.out.display());
+        let n = file.garment.vertex_count();
+        let train = sequences(
+            &self.clips.motions,
+            &self.sims,
+            &self.clips,
+            &file.body.skeleton,
+            n,
+        )?;
+        if let Some(s) = train.iter().find(|s| (s.clip.fps - info.fps).abs() > 1e-3) {
+            bail!(
+                "{} plays at {} fps, the space was trained at {} fps: give --fps {}",
+                s.name,
+                s.clip.fps,
+                info.fps,
+                info.fps
+            );
+        }
+        let eval = self.eval_sequence(&file.body.skeleton, n)?;
+        let data = FrameData::new(&file.body, &self.seeds(&file)?, &train, device);
+        let frames = data.len();
+        say(&format!(
+            "{frames} training frames from {} clip(s); the space stays frozen",
+            train.len()
+        ));
+        let space_shape = &info.shape;
+        let settings = MotionSettings {
+            shape: MotionShape::for_space(&space_shape.encoder, self.motion_features),
+            epochs: self.epochs,
+            batch: self.batch.unwrap_or(8),
+            learning_rate: self.lr.unwrap_or(1e-3),
+            seed: self.seed,
+            device,
+        };
+        let fps = info.fps as f64;
+        let mut trainer = MotionTrainer::new(file, data, fps, settings)?;
+        if self.resume {
+            trainer.resume(&crate::train::checkpoint_path(&self.out))?;
+        }
+        let done = trainer.epochs_done();
+        let fitted = fit(&mut trainer, &self.fit_options())?;
+        let dynamic = trainer.dynamic();
+        let train_err = one_step(dynamic, &trainer.data, fps)?;
+        let eval = eval
+            .map(|s| {
+                let data = self.frame_data(&trainer.file, &s, device)?;
+                Ok::<_, anyhow::Error>((s.name.clone(), one_step(dynamic, &data, fps)?))
+            })
+            .transpose()?;
+        let info = trainer.file.info.dynamic()?;
+        Ok(Report {
+            stage: "dynamic".into(),
+            frames,
+            frames_per_second: (frames * (fitted.epochs - done)) as f64 / fitted.seconds.max(1e-9),
+            train: train_err,
+            eval,
+            radius_mm: radii_mm(info),
+            last: None,
+            last_motion: trainer.info().history.last().cloned(),
+            fitted,
+        })
     }
+
+    fn fit_options(&self) -> FitOptions<'_> {
+        FitOptions {
+            epochs: self.epochs,
+            out: &self.out,
+            quiet: self.output.json,
+            log: self.log.as_deref(),
+        }
+    }
+
+    fn eval_sequence(&self, skeleton: &Skeleton, vertices: usize) -> Result<Option<Sequence>> {
+        Ok(match (&self.eval_motion, &self.eval_sim) {
+            (Some(m), Some(s)) => sequences(
+                std::slice::from_ref(m),
+                std::slice::from_ref(s),
+                &self.clips,
+                skeleton,
+                vertices,
+            )?
+            .pop(),
+            _ => None,
+        })
+    }
+
+    fn seeds(&self, file: &ModelFile) -> Result<Seeds> {
+        let info = file.info.dynamic()?;
+        Seeds::from_vertices(&file.body, &info.seeds, &info.seed_parts)
+    }
+
+    fn frame_data(&self, file: &ModelFile, s: &Sequence, device: tch::Device) -> Result<FrameData> {
+        Ok(FrameData::new(
+            &file.body,
+            &self.seeds(file)?,
+            std::slice::from_ref(s),
+            device,
+        ))
+    }
+}
+
+fn radii_mm(info: &crate::models::file::DynamicInfo) -> Vec<(String, f64)> {
+    info.parts
+        .iter()
+        .cloned()
+        .zip(info.radii.iter().map(|r| r * 1e3))
+        .collect()
 }

@@ -10,7 +10,7 @@
 //! timestamps or absolute paths. Checkpoints are the same format plus the Adam state.
 
 use super::dynamic::space::Consts;
-use super::dynamic::{Seeds, Space, SpaceShape, UvRaster};
+use super::dynamic::{Dynamic, MotionEncoder, MotionShape, Seeds, Space, SpaceShape, UvRaster};
 use super::pbns::{flat, Pbns, PbnsShape};
 use super::{Model, ModelKind};
 use crate::body::Body;
@@ -76,6 +76,49 @@ pub struct DynamicInfo {
     pub fps: f32,
     pub training: DynamicTraining,
     pub history: Vec<DynamicEpoch>,
+    /// Stage 2, once trained: the motion encoder's sizes and its training.
+    #[serde(default)]
+    pub motion: Option<MotionInfo>,
+}
+
+/// The dynamic-aware encoder's sizes, training settings and per-epoch history.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MotionInfo {
+    pub shape: MotionShape,
+    pub seed: u64,
+    pub batch: usize,
+    pub learning_rate: f64,
+    /// Clip file names and their frame counts.
+    pub motions: Vec<String>,
+    pub frames: usize,
+    pub history: Vec<MotionEpoch>,
+}
+
+/// The dynamic stage's loss terms (mean over an epoch's steps): `L_geo` and `L_Z` for the frame
+/// and the virtual sample `E_t = 0`, and `λ2·L_reg`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct MotionTerms {
+    pub geometry: f64,
+    pub virtual_geometry: f64,
+    pub latent: f64,
+    pub virtual_latent: f64,
+    pub regulariser: f64,
+}
+
+impl MotionTerms {
+    pub fn total(&self) -> f64 {
+        self.geometry + self.virtual_geometry + self.latent + self.virtual_latent + self.regulariser
+    }
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MotionEpoch {
+    pub epoch: usize,
+    pub loss: f64,
+    pub terms: MotionTerms,
+    pub learning_rate: f64,
+    /// Mean vertex distance (mm) of the one-step predictions of the epoch's training frames.
+    pub train_mean_mm: f64,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -252,8 +295,8 @@ impl ModelFile {
         }
     }
 
-    /// The dynamic model's generative space, or an error saying which kind the file holds.
-    pub fn dynamic(&self) -> Result<&Space> {
+    /// The dynamic model, or an error saying which kind the file holds.
+    pub fn dynamic(&self) -> Result<&Dynamic> {
         match &self.model {
             Model::Dynamic(m) => Ok(m),
             Model::Pbns(_) => Err(not_kind("dynamic", "PBNS")),
@@ -293,9 +336,16 @@ pub fn to_bytes(file: &ModelFile) -> Result<Vec<u8>> {
     let mut blobs: Vec<(String, Blob)> = match &file.model {
         Model::Pbns(m) => pbns_blobs(m),
         Model::Dynamic(m) => m
+            .space
             .parameters()
             .into_iter()
             .map(|(name, t)| (format!("space.{name}"), Blob::float(&t)))
+            .chain(
+                m.motion
+                    .iter()
+                    .flat_map(|e| e.parameters())
+                    .map(|(name, t)| (name, Blob::float(&t))),
+            )
             .collect(),
     };
     blobs.push(("garment.rest".into(), Blob::points(&file.garment.positions)));
@@ -433,8 +483,8 @@ pub fn load(path: &Path, device: Device) -> Result<ModelFile> {
     let (model, known): (Model, fn(&str) -> bool) = match &info.model {
         KindInfo::Pbns(p) => (Model::Pbns(load_pbns(&tensors, p)?), is_pbns_tensor),
         KindInfo::Dynamic(d) => (
-            Model::Dynamic(Box::new(load_space(&tensors, d, &garment, &body)?)),
-            |n: &str| n.starts_with("space."),
+            Model::Dynamic(Box::new(load_dynamic(&tensors, d, &garment, &body)?)),
+            |n: &str| n.starts_with("space.") || n.starts_with("motion."),
         ),
     };
     let common = |name: &str| {
@@ -482,6 +532,33 @@ fn load_space(t: &Tensors, info: &DynamicInfo, garment: &TriMesh, body: &Body) -
         .load_parameters(&stored)
         .map_err(|e| t.fail(e.to_string()))?;
     Ok(space)
+}
+
+/// The space and, when the description has one, the motion encoder (tensors `motion.*`).
+fn load_dynamic(
+    t: &Tensors,
+    info: &DynamicInfo,
+    garment: &TriMesh,
+    body: &Body,
+) -> Result<Dynamic> {
+    let space = load_space(t, info, garment, body)?;
+    let motion = match &info.motion {
+        Some(m) => {
+            let mut encoder = MotionEncoder::new(m.shape.clone(), &space, t.device);
+            let stored: Vec<(String, Tensor)> =
+                t.st.names()
+                    .into_iter()
+                    .filter(|n| n.starts_with("motion."))
+                    .map(|n| Ok((n.to_string(), t.get(n)?)))
+                    .collect::<Result<_>>()?;
+            encoder
+                .load_parameters(&stored)
+                .map_err(|e| t.fail(e.to_string()))?;
+            Some(encoder)
+        }
+        None => None,
+    };
+    Ok(Dynamic { space, motion })
 }
 
 /// The PBNS network from its tensors, checked against its description.

@@ -13,7 +13,7 @@ use tch::Tensor;
 /// A trained garment model, of the kind its file's metadata names.
 pub enum Model {
     Pbns(Pbns),
-    Dynamic(Box<dynamic::Space>),
+    Dynamic(Box<dynamic::Dynamic>),
 }
 
 /// The model kinds a file can hold (the metadata's `model.kind`).

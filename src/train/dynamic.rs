@@ -15,7 +15,9 @@ use crate::geometry::edges::unique_edges;
 use crate::geometry::sdf_grid::SdfGrid;
 use crate::geometry::{SurfaceIndex, TriMesh};
 use crate::models::dynamic::space::Consts;
-use crate::models::dynamic::{seeds::PARTS, Seeds, Space, SpaceShape, UvRaster};
+use crate::models::dynamic::{
+    seeds::PARTS, BodyFrames, Dynamic, MeshLaplacian, Seeds, Space, SpaceShape, UvRaster,
+};
 use crate::models::file::{
     self, BodyInfo, DynamicEpoch, DynamicInfo, DynamicTraining, GarmentInfo, KindInfo, ModelFile,
     ModelInfo, SpaceTerms, FORMAT, VERSION,
@@ -73,40 +75,31 @@ impl Settings {
     }
 }
 
-/// Frames as tensors: garment `[F, V, 3]`, seed positions `[F, N, 3]`, seed transforms `[F, N, 12]`.
+/// Frames as tensors: the garment `[F, V, 3]` and the body at each frame, clips one after
+/// another (`clip_starts` gives each clip's first frame).
 pub struct FrameData {
     pub garment: Tensor,
-    pub seeds: Tensor,
-    pub transforms: Tensor,
+    pub body: BodyFrames,
+    pub clip_starts: Vec<usize>,
 }
 
 impl FrameData {
     pub fn new(body: &Body, seeds: &Seeds, sequences: &[Sequence], device: Device) -> FrameData {
-        let (mut g, mut b, mut m) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut g, mut parts, mut clip_starts) = (Vec::new(), Vec::new(), Vec::new());
+        let mut frames = 0;
         for s in sequences {
-            for (f, frame) in s.garment.iter().enumerate() {
-                let skinning = body.skeleton.skinning_matrices(&s.clip.local_pose(f));
-                let t = seeds.transforms(body, &skinning);
-                g.extend(frame.iter().flatten().copied());
-                for (j, tj) in t.iter().enumerate() {
-                    let r = seeds.rest[j];
-                    b.extend((0..3).map(|k| {
-                        tj[4 * k] * r[0]
-                            + tj[4 * k + 1] * r[1]
-                            + tj[4 * k + 2] * r[2]
-                            + tj[4 * k + 3]
-                    }));
-                    m.extend_from_slice(tj);
-                }
-            }
+            clip_starts.push(frames);
+            frames += s.garment.len();
+            g.extend(s.garment.iter().flatten().flatten().copied());
+            let poses: Vec<_> = (0..s.garment.len()).map(|f| s.clip.local_pose(f)).collect();
+            parts.push(BodyFrames::new(body, seeds, &poses, device));
         }
-        let frames: i64 = sequences.iter().map(|s| s.garment.len() as i64).sum();
-        let n = seeds.rest.len() as i64;
-        let t = |v: Vec<f32>, d: &[i64]| Tensor::from_slice(&v).reshape(d).to_device(device);
         FrameData {
-            garment: t(g, &[frames, -1, 3]),
-            seeds: t(b, &[frames, n, 3]),
-            transforms: t(m, &[frames, n, 12]),
+            garment: Tensor::from_slice(&g)
+                .reshape([frames as i64, -1, 3])
+                .to_device(device),
+            body: BodyFrames::cat(&parts),
+            clip_starts,
         }
     }
 
@@ -119,7 +112,7 @@ impl FrameData {
     }
 
     /// Indices of frames `start..start + n`.
-    fn range(&self, start: usize, n: usize) -> Tensor {
+    pub fn range(&self, start: usize, n: usize) -> Tensor {
         Tensor::arange_start(
             start as i64,
             (start + n) as i64,
@@ -127,20 +120,18 @@ impl FrameData {
         )
     }
 
-    fn batch(&self, idx: &Tensor) -> (Tensor, Tensor, Tensor) {
+    pub fn batch(&self, idx: &Tensor) -> (Tensor, Tensor, Tensor) {
         (
             self.garment.index_select(0, idx),
-            self.seeds.index_select(0, idx),
-            self.transforms.index_select(0, idx),
+            self.body.seeds.index_select(0, idx),
+            self.body.transforms.index_select(0, idx),
         )
     }
 }
 
 /// Mesh operators for the losses: uniform Laplacian, edges and their rest lengths.
 struct MeshOps {
-    src: Tensor,
-    dst: Tensor,
-    degree: Tensor,
+    laplacian: MeshLaplacian,
     edges: Tensor,
     rest_lengths: Tensor,
 }
@@ -148,14 +139,6 @@ struct MeshOps {
 impl MeshOps {
     fn new(mesh: &TriMesh, device: Device) -> MeshOps {
         let pairs = unique_edges(&mesh.triangles);
-        let (mut src, mut dst) = (Vec::new(), Vec::new());
-        let mut degree = vec![0f32; mesh.vertex_count()];
-        for &[a, b] in &pairs {
-            src.extend([a as i64, b as i64]);
-            dst.extend([b as i64, a as i64]);
-            degree[a as usize] += 1.0;
-            degree[b as usize] += 1.0;
-        }
         let edges: Vec<i64> = pairs.iter().flatten().map(|&v| v as i64).collect();
         let rest = Tensor::from_slice(
             &mesh
@@ -172,23 +155,14 @@ impl MeshOps {
             .to_device(device);
         let rest_lengths = edge_lengths(&rest.unsqueeze(0), &edges).squeeze_dim(0);
         MeshOps {
-            src: Tensor::from_slice(&src).to_device(device),
-            dst: Tensor::from_slice(&dst).to_device(device),
-            degree: Tensor::from_slice(&degree)
-                .reshape([1, -1, 1])
-                .to_device(device)
-                .clamp_min(1.0),
+            laplacian: MeshLaplacian::new(&mesh.triangles, mesh.vertex_count(), device),
             edges,
             rest_lengths,
         }
     }
 
-    /// `x − mean of its neighbours`, per vertex of `x [B, V, 3]`.
     fn laplacian(&self, x: &Tensor) -> Tensor {
-        let sum = x
-            .zeros_like()
-            .index_add(1, &self.dst, &x.index_select(1, &self.src));
-        x - sum / &self.degree
+        self.laplacian.of(x)
     }
 }
 
@@ -266,6 +240,34 @@ pub struct Reconstruction {
     pub p99_mm: f64,
     pub max_mm: f64,
     pub worst_frame: usize,
+}
+
+impl Reconstruction {
+    /// Per-vertex L2 errors of predictions `[F, V, 3]` against the truth.
+    pub fn of(pred: &Tensor, truth: &Tensor) -> Reconstruction {
+        let d = (pred - truth)
+            .square()
+            .sum_dim_intlist(2, false, Kind::Float)
+            .sqrt();
+        let per_frame: Vec<f32> = d
+            .mean_dim(1, false, Kind::Float)
+            .try_into()
+            .unwrap_or_default();
+        let mut all: Vec<f32> = d.flatten(0, -1).try_into().unwrap_or_default();
+        all.sort_by(f32::total_cmp);
+        let worst_frame = per_frame
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(b.1))
+            .map_or(0, |(f, _)| f);
+        Reconstruction {
+            frames: per_frame.len(),
+            mean_mm: 1e3 * all.iter().map(|&x| x as f64).sum::<f64>() / all.len().max(1) as f64,
+            p99_mm: 1e3 * crate::metrics::percentile(&all, 0.99),
+            max_mm: 1e3 * all.last().copied().unwrap_or(0.0) as f64,
+            worst_frame,
+        }
+    }
 }
 
 impl SpaceTrainer {
@@ -347,10 +349,14 @@ impl SpaceTrainer {
                     frames: data.len(),
                 },
                 history: Vec::new(),
+                motion: None,
             }),
         };
         let file = ModelFile {
-            model: Model::Dynamic(Box::new(space)),
+            model: Model::Dynamic(Box::new(Dynamic {
+                space,
+                motion: None,
+            })),
             info,
             lbs,
             garment: garment.mesh,
@@ -369,7 +375,7 @@ impl SpaceTrainer {
 
     pub fn space(&self) -> &Space {
         match &self.file.model {
-            Model::Dynamic(s) => s,
+            Model::Dynamic(d) => &d.space,
             Model::Pbns(_) => unreachable!("a dynamic trainer holds a dynamic model"),
         }
     }
@@ -476,29 +482,7 @@ impl SpaceTrainer {
 
     /// Per-vertex L2 error of the space's reconstructions of `data`.
     pub fn measure(space: &Space, data: &FrameData) -> Reconstruction {
-        let pred = Self::reconstruct(space, data);
-        let d = (pred - &data.garment)
-            .square()
-            .sum_dim_intlist(2, false, Kind::Float)
-            .sqrt();
-        let per_frame: Vec<f32> = d
-            .mean_dim(1, false, Kind::Float)
-            .try_into()
-            .unwrap_or_default();
-        let mut all: Vec<f32> = d.flatten(0, -1).try_into().unwrap_or_default();
-        all.sort_by(f32::total_cmp);
-        let worst_frame = per_frame
-            .iter()
-            .enumerate()
-            .max_by(|a, b| a.1.total_cmp(b.1))
-            .map_or(0, |(f, _)| f);
-        Reconstruction {
-            frames: data.len(),
-            mean_mm: 1e3 * all.iter().map(|&x| x as f64).sum::<f64>() / all.len().max(1) as f64,
-            p99_mm: 1e3 * crate::metrics::percentile(&all, 0.99),
-            max_mm: 1e3 * all.last().copied().unwrap_or(0.0) as f64,
-            worst_frame,
-        }
+        Reconstruction::of(&Self::reconstruct(space, data), &data.garment)
     }
 
     fn adam_params(&self) -> Vec<(String, Tensor)> {
@@ -596,11 +580,11 @@ impl Training for SpaceTrainer {
             bail!("{}: checkpoint was made with other inputs or settings (garment, clips, preset, seed); start without --resume", path.display());
         }
         let history = theirs.history.clone();
-        let stored = checkpoint.dynamic()?.parameters();
-        let Model::Dynamic(space) = &mut self.file.model else {
+        let stored = checkpoint.dynamic()?.space.parameters();
+        let Model::Dynamic(dynamic) = &mut self.file.model else {
             unreachable!("a dynamic trainer holds a dynamic model")
         };
-        space.load_parameters(&stored)?;
+        dynamic.space.load_parameters(&stored)?;
         let p = self.adam_params();
         self.adam.restore(
             &p.iter().map(|(n, t)| (n.clone(), t)).collect::<Vec<_>>(),

@@ -4,6 +4,7 @@
 pub mod adam;
 pub mod dynamic;
 pub mod losses;
+pub mod motion;
 pub mod nearest;
 pub mod pbns;
 pub mod poses;

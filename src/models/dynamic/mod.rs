@@ -1,13 +1,71 @@
 //! The motion-guided dynamic garment model (Zhang et al., "Motion Guided Deep Dynamic 3D
-//! Garments"), stage 1: the generative space of garment deformations. A garment frame, measured
+//! Garments"). Stage 1, the generative space of garment deformations: a garment frame, measured
 //! relative to body seed points and laid out in its UV map, is encoded to a latent `Z`; the
 //! decoder gives per-vertex displacements in each vertex's rest frame and the garment is skinned
 //! by the seeds with distance-based weights whose kernel radius is learnt per body part.
+//! Stage 2, the dynamic-aware encoder: the previous garment state and the body's motion give the
+//! next frame's latent, rolled out frame after frame.
 
+pub mod frames;
+pub mod motion;
 pub mod seeds;
 pub mod space;
 pub mod uv;
 
+pub use frames::BodyFrames;
+pub use motion::{MotionEncoder, MotionShape};
 pub use seeds::Seeds;
 pub use space::{Space, SpaceShape};
 pub use uv::UvRaster;
+
+/// A dynamic model: the generative space and, once stage 2 is trained, its motion encoder.
+pub struct Dynamic {
+    pub space: Space,
+    pub motion: Option<MotionEncoder>,
+}
+
+impl Dynamic {
+    /// The motion encoder, or an error saying the model has only its space.
+    pub fn motion(&self) -> anyhow::Result<&MotionEncoder> {
+        self.motion.as_ref().ok_or_else(|| {
+            anyhow::anyhow!("this dynamic model has only its generative space (stage 1); train its motion encoder with `garmentbake train-dynamic --stage dynamic --from MODEL`")
+        })
+    }
+}
+
+/// The garment's uniform Laplacian `x − mean of its neighbours`, per vertex of `x [B, V, 3]`,
+/// as one gather and one scatter.
+pub struct MeshLaplacian {
+    src: tch::Tensor,
+    dst: tch::Tensor,
+    degree: tch::Tensor,
+}
+
+impl MeshLaplacian {
+    pub fn new(triangles: &[[u32; 3]], vertices: usize, device: tch::Device) -> MeshLaplacian {
+        let (mut src, mut dst) = (Vec::new(), Vec::new());
+        let mut degree = vec![0f32; vertices];
+        for [a, b] in crate::geometry::edges::unique_edges(triangles) {
+            src.extend([a as i64, b as i64]);
+            dst.extend([b as i64, a as i64]);
+            degree[a as usize] += 1.0;
+            degree[b as usize] += 1.0;
+        }
+        let t = |v: &[i64]| tch::Tensor::from_slice(v).to_device(device);
+        MeshLaplacian {
+            src: t(&src),
+            dst: t(&dst),
+            degree: tch::Tensor::from_slice(&degree)
+                .reshape([1, -1, 1])
+                .to_device(device)
+                .clamp_min(1.0),
+        }
+    }
+
+    pub fn of(&self, x: &tch::Tensor) -> tch::Tensor {
+        let sum = x
+            .zeros_like()
+            .index_add(1, &self.dst, &x.index_select(1, &self.src));
+        x - sum / &self.degree
+    }
+}

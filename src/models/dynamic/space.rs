@@ -330,24 +330,59 @@ impl Space {
     /// scattering vertices into texels (barycentric weights summing to one) commutes with it.
     /// Exactly the 1×1 convolution of the map; `[B, C, H, W]` before the activation.
     pub fn descriptor_features(&self, g: &Tensor, b: &Tensor) -> Tensor {
-        let (bs, n) = (g.size()[0], self.shape.seeds as i64);
+        let n = self.shape.seeds as i64;
         let c = self.s0_weight.size()[0];
         let w = self.s0_weight.narrow(1, 0, 3 * n).reshape([c, n, 3]);
         let a = w.sum_dim_intlist(1, false, Kind::Float);
         let offset = Tensor::einsum("cnk,bnk->bc", &[w, b.shallow_clone()], None::<i64>);
         let per_vertex = Tensor::einsum("ck,bvk->bvc", &[a, g.shallow_clone()], None::<i64>)
             - offset.unsqueeze(1);
+        let map = self.scatter(&per_vertex);
+        let mask = self.s0_weight.select(1, 3 * n).reshape([1, c, 1, 1]) * &self.consts.mask;
+        map + mask + self.s0_bias.reshape([1, c, 1, 1])
+    }
+
+    /// Per-vertex channels `[B, V, C]` laid out in the UV map `[B, C, H, W]`: each texel the
+    /// barycentric blend of its covering triangle's vertices (zero outside the layout).
+    pub fn scatter(&self, per_vertex: &Tensor) -> Tensor {
+        let (bs, c) = (per_vertex.size()[0], per_vertex.size()[2]);
         let k = &self.consts;
         let per = per_vertex
             .index_select(1, &k.texel_vertices)
             .reshape([bs, -1, 3, c]);
         let side = self.shape.map as i64;
-        let map = (per * &k.texel_weights)
+        (per * &k.texel_weights)
             .sum_dim_intlist(2, false, Kind::Float)
             .permute([0, 2, 1])
-            .reshape([bs, c, side, side]);
-        let mask = self.s0_weight.select(1, 3 * n).reshape([1, c, 1, 1]) * &k.mask;
-        map + mask + self.s0_bias.reshape([1, c, 1, 1])
+            .reshape([bs, c, side, side])
+    }
+
+    /// `[1, 1, H, W]`: 1 on texels the garment's layout covers.
+    pub fn layout_mask(&self) -> &Tensor {
+        &self.consts.mask
+    }
+
+    /// A UV-space map `[B, C, H, W]` read at each vertex's UV (bilinear), `[B, V, C]`.
+    pub fn at_vertices(&self, map: &Tensor) -> Tensor {
+        let bs = map.size()[0];
+        let grid = self.consts.grid.expand([bs, -1, 1, 2], false);
+        map.grid_sampler(&grid, 0, 1, false)
+            .squeeze_dim(3)
+            .permute([0, 2, 1])
+    }
+
+    /// Where garments `g [B, V, 3]` go when they follow the seeds rigidly from transforms
+    /// `before` to `now` (each vertex's blended transform undone, then redone).
+    pub fn follow(&self, g: &Tensor, before: &Tensor, now: &Tensor) -> Tensor {
+        self.skin(&self.unskin(g, before), now)
+    }
+
+    /// Garments `g [B, V, 3]` with each vertex's seed-blended transform under `m` undone.
+    pub fn unskin(&self, g: &Tensor, m: &Tensor) -> Tensor {
+        let (rot, shift) = self.blended(m);
+        rot.inverse()
+            .matmul(&(g - shift).unsqueeze(3))
+            .squeeze_dim(3)
     }
 
     /// `Z [B, L]` of garments `g` with seeds at `b` and seed transforms `m`:
@@ -362,11 +397,7 @@ impl Space {
     /// inverted) and expressed as displacements in the vertices' rest frames, `[B, 3V]`: what
     /// [`Space::canonical`] would have to output to reproduce `g` exactly.
     pub fn rest_displacements(&self, g: &Tensor, m: &Tensor) -> Tensor {
-        let (rot, shift) = self.blended(m);
-        let local = rot
-            .inverse()
-            .matmul(&(g - shift).unsqueeze(3))
-            .squeeze_dim(3);
+        let local = self.unskin(g, m);
         let k = &self.consts;
         Tensor::einsum(
             "vkc,bvc->bvk",
@@ -420,11 +451,7 @@ impl Space {
             .reshape([bs, c, 2, 2]);
         let xi = self.decoder.forward(&x);
         let k = &self.consts;
-        let grid = k.grid.expand([bs, -1, 1, 2], false);
-        let per_vertex = xi
-            .grid_sampler(&grid, 0, 1, false)
-            .squeeze_dim(3)
-            .permute([0, 2, 1]);
+        let per_vertex = self.at_vertices(&xi);
         let v = per_vertex.size()[1];
         let input = Tensor::cat(
             &[per_vertex, k.uv.unsqueeze(0).expand([bs, v, 2], false)],
@@ -436,9 +463,18 @@ impl Space {
 
     /// The rest garment moved by rest-frame displacements `d [B, V, 3]` (or `[B, 3V]`).
     pub fn displaced(&self, d: &Tensor) -> Tensor {
-        let k = &self.consts;
+        self.offset_canonical(&self.consts.rest, d)
+    }
+
+    /// Canonical garments `[B, V, 3]` moved by displacements `d` in the vertices' rest frames.
+    pub fn offset_canonical(&self, canonical: &Tensor, d: &Tensor) -> Tensor {
         let d = d.reshape([d.size()[0], -1, 3]);
-        &k.rest + Tensor::einsum("bvk,vkc->bvc", &[d, k.frames.shallow_clone()], None::<i64>)
+        canonical
+            + Tensor::einsum(
+                "bvk,vkc->bvc",
+                &[d, self.consts.frames.shallow_clone()],
+                None::<i64>,
+            )
     }
 
     /// Each vertex's seed-blended transform under seed transforms `m [B, N, 12]` (row-major
@@ -446,7 +482,7 @@ impl Space {
     /// `softmax_j(−|g0_i − b0_j|² / 2ρ²_part(j))` at the REST garment `g0` (the paper evaluates
     /// them at the decoded `ĝ`): fixed weights make the skinning invertible per vertex, which
     /// [`Space::rest_displacements`] needs.
-    fn blended(&self, m: &Tensor) -> (Tensor, Tensor) {
+    pub fn blended(&self, m: &Tensor) -> (Tensor, Tensor) {
         let k = &self.consts;
         let d2 = (k.rest.unsqueeze(1) - k.seed_rest.unsqueeze(0))
             .square()
@@ -486,32 +522,42 @@ impl Space {
 
     /// Trainable tensors by name, sorted (the file's and Adam's order).
     pub fn parameters(&self) -> Vec<(String, Tensor)> {
-        let mut v: Vec<(String, Tensor)> = self.vs.variables().into_iter().collect();
-        v.sort_by(|a, b| a.0.cmp(&b.0));
-        v
+        sorted_variables(&self.vs)
     }
 
     /// Copies stored values into the parameters (shapes must match).
     pub fn load_parameters(&mut self, stored: &[(String, Tensor)]) -> Result<()> {
-        let mut vars = self.vs.variables();
-        for (name, t) in stored {
-            let Some(p) = vars.get_mut(name) else {
-                continue;
-            };
-            if p.size() != t.size() {
-                bail!(
-                    "tensor '{name}' has shape {:?}, the network expects {:?}",
-                    t.size(),
-                    p.size()
-                );
-            }
-            tch::no_grad(|| p.copy_(t));
-        }
-        if let Some(missing) = vars.keys().find(|n| !stored.iter().any(|(s, _)| s == *n)) {
-            bail!("missing tensor '{missing}'");
-        }
-        Ok(())
+        load_variables(&mut self.vs, stored)
     }
+}
+
+/// A var store's tensors by name, sorted (the file's and Adam's order).
+pub fn sorted_variables(vs: &nn::VarStore) -> Vec<(String, Tensor)> {
+    let mut v: Vec<(String, Tensor)> = vs.variables().into_iter().collect();
+    v.sort_by(|a, b| a.0.cmp(&b.0));
+    v
+}
+
+/// Copies stored values into a var store's tensors (every one present, shapes equal).
+pub fn load_variables(vs: &mut nn::VarStore, stored: &[(String, Tensor)]) -> Result<()> {
+    let mut vars = vs.variables();
+    for (name, t) in stored {
+        let Some(p) = vars.get_mut(name) else {
+            continue;
+        };
+        if p.size() != t.size() {
+            bail!(
+                "tensor '{name}' has shape {:?}, the network expects {:?}",
+                t.size(),
+                p.size()
+            );
+        }
+        tch::no_grad(|| p.copy_(t));
+    }
+    if let Some(missing) = vars.keys().find(|n| !stored.iter().any(|(s, _)| s == *n)) {
+        bail!("missing tensor '{missing}'");
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -1,0 +1,77 @@
+//! What the dynamic model needs of the posed body at each frame, as tensors: the seeds'
+//! positions, transforms and normals, and the root joint's rotation.
+
+use super::seeds::Seeds;
+use crate::body::Body;
+use crate::rig::JointTransform;
+use tch::{Device, Tensor};
+
+/// Per-frame body quantities `[F, ...]`.
+pub struct BodyFrames {
+    /// Seed positions `[F, N, 3]`.
+    pub seeds: Tensor,
+    /// Seed LBS transforms, row-major 3×4, `[F, N, 12]`.
+    pub transforms: Tensor,
+    /// Seed normals (the rest normal turned by the transform) `[F, N, 3]`.
+    pub normals: Tensor,
+    /// The root joint's rotation against the bind pose `[F, 3, 3]`.
+    pub root: Tensor,
+}
+
+impl BodyFrames {
+    pub fn new(
+        body: &Body,
+        seeds: &Seeds,
+        poses: &[Vec<JointTransform>],
+        device: Device,
+    ) -> BodyFrames {
+        let (mut b, mut m, mut n, mut r) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        for pose in poses {
+            let skinning = body.skeleton.skinning_matrices(pose);
+            for (j, t) in seeds.transforms(body, &skinning).iter().enumerate() {
+                let (p, normal) = (seeds.rest[j], body.normals[seeds.vertices[j] as usize]);
+                let row = |k: usize, x: [f32; 3], w: f32| {
+                    t[4 * k] * x[0] + t[4 * k + 1] * x[1] + t[4 * k + 2] * x[2] + t[4 * k + 3] * w
+                };
+                b.extend((0..3).map(|k| row(k, p, 1.0)));
+                let turned: [f32; 3] = std::array::from_fn(|k| row(k, normal, 0.0));
+                let len = turned.iter().map(|x| x * x).sum::<f32>().sqrt().max(1e-12);
+                n.extend(turned.map(|x| x / len));
+                m.extend_from_slice(t);
+            }
+            let root = skinning[0];
+            r.extend((0..9).map(|k| root[(k / 3, k % 3)]));
+        }
+        let (f, s) = (poses.len() as i64, seeds.rest.len() as i64);
+        let t = |v: Vec<f32>, d: &[i64]| Tensor::from_slice(&v).reshape(d).to_device(device);
+        BodyFrames {
+            seeds: t(b, &[f, s, 3]),
+            transforms: t(m, &[f, s, 12]),
+            normals: t(n, &[f, s, 3]),
+            root: t(r, &[f, 3, 3]),
+        }
+    }
+
+    /// Frames `idx` `[B]`.
+    pub fn select(&self, idx: &Tensor) -> BodyFrames {
+        BodyFrames {
+            seeds: self.seeds.index_select(0, idx),
+            transforms: self.transforms.index_select(0, idx),
+            normals: self.normals.index_select(0, idx),
+            root: self.root.index_select(0, idx),
+        }
+    }
+
+    /// Frames of several clips, one after another.
+    pub fn cat(parts: &[BodyFrames]) -> BodyFrames {
+        let all = |f: fn(&BodyFrames) -> &Tensor| {
+            Tensor::cat(&parts.iter().map(f).collect::<Vec<_>>(), 0)
+        };
+        BodyFrames {
+            seeds: all(|p| &p.seeds),
+            transforms: all(|p| &p.transforms),
+            normals: all(|p| &p.normals),
+            root: all(|p| &p.root),
+        }
+    }
+}

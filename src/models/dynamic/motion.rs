@@ -1,0 +1,323 @@
+//! The dynamic-aware encoder (paper Sec. 5): from the previous garment state and the body's
+//! motion to the next frame's latent. `C` maps the motion maps (garment velocity and
+//! acceleration, in UV space) and the body-interaction map `C_t` to `E_t`; `E_dyn` maps
+//! `[S(M^P_{t−1}), E_t]` to the latent `Z_t`, decoded by the frozen space.
+//!
+//! Choices beside the paper, each for a model that trains in minutes on a laptop:
+//! - `E_dyn` is residual: `Z_t = E_sta(g_{t−1}) + ΔE(S(M^P_{t−1}), E_t)`, the frozen static
+//!   encoder (with its linear path) of the previous garment plus a learnt change whose last layer
+//!   starts at zero. The untrained model holds the previous frame's canonical shape and lets the
+//!   seeds carry it: the virtual sample `E_t = 0` then starts at its target, and the loss keeps it
+//!   there.
+//! - One more per-vertex input: where each previous garment vertex would go if it followed the
+//!   body rigidly from `t − 1` to `t` (the seeds' blended transforms, undone at `t − 1`, applied at
+//!   `t`). It is the body's motion as the garment feels it; without it `E_t` sees the body only
+//!   through contacts, and a skirt's swing is driven by the hips it does not touch at the hem.
+//! - Vectors are expressed in the root joint's frame at `t` (turning in place is not a new motion).
+//! - A linear path beside the networks, like the space's: `Z_t = W [Z^ball_t, Z^stay_t, Z_{t−1}, 1]`
+//!   with `Z^stay_t` the static latent of the previous garment held still in the world against the
+//!   current body, and `Z^ball_t` of it moved on at its velocity (pure inertia), both through the
+//!   frozen static encoder. `W` starts as the ridge-regression fit of the training frames (an
+//!   integrator in latent space: inertia, then a learnt pull back towards the body); the residual
+//!   network `ΔE(S(M^P_{t−1}), E_t)` learns what it misses. The virtual sample `E_t = 0` (no relative
+//!   motion) sees `Z^ball = Z^stay = Z_{t−1}`.
+
+use super::frames::BodyFrames;
+use super::space::Space;
+use serde::{Deserialize, Serialize};
+use tch::nn::{self, Module};
+use tch::{Kind, Tensor};
+
+/// Sizes of the dynamic-aware encoder.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MotionShape {
+    /// Channels of `E_t` (the output of `C`).
+    pub features: usize,
+    /// Channels after each stride-2 convolution of `E_dyn`, down to 2×2.
+    pub encoder: Vec<usize>,
+    /// σ of the interaction weight `a = exp(−|g_{t−1} − b_{t−1}|² / 2σ²)` (metres).
+    pub sigma: f32,
+}
+
+impl MotionShape {
+    /// Channel widths that follow the space's own encoder (same depth, so the map reaches 2×2).
+    pub fn for_space(space_encoder: &[usize], features: usize) -> MotionShape {
+        MotionShape {
+            features,
+            encoder: space_encoder.to_vec(),
+            sigma: 0.05,
+        }
+    }
+}
+
+/// Per-vertex motion channels: velocity, acceleration and rigid-follow step, 3 each.
+pub const MOTION_CHANNELS: i64 = 9;
+/// Scales that bring the inputs to about unit size: velocities in m/s, accelerations in
+/// m/s per frame, penetration depths in centimetres.
+const FORCE_SCALE: f64 = 100.0;
+
+/// The inputs at frame `t` for a batch, as the encoder needs them.
+pub struct MotionInputs {
+    /// `S(M^P_{t−1})` `[B, C, H, W]` (frozen space).
+    pub static_features: Tensor,
+    /// `E_sta` of the previous garment `[B, L]` (frozen space, linear path included).
+    pub previous_latent: Tensor,
+    /// `[Z^ball_t, Z^stay_t]` `[B, 2L]` (see the module's notes).
+    pub inertia: Tensor,
+    /// Per-vertex motion channels `[B, V, 9]` in the root frame at `t`.
+    pub motion: Tensor,
+    /// Interaction forces `a_ij · ReLU(−q_ij) · n_j` `[B, V, N, 3]` in the root frame at `t`.
+    pub forces: Tensor,
+}
+
+/// One frame's history and body, batched: garments at `t−1, t−2, t−3` `[B, V, 3]`, the body at
+/// `t − 1` and at `t`, and the frame rate.
+pub struct History {
+    pub garment: [Tensor; 3],
+    pub before: BodyFrames,
+    pub now: BodyFrames,
+    pub fps: f64,
+}
+
+/// What only the frozen space gives, per frame: `S(M^P_{t−1})`, `E_sta(g_{t−1})` and the
+/// inertia latents `[Z^ball_t, Z^stay_t]`.
+pub struct StaticInputs {
+    pub static_features: Tensor,
+    pub previous_latent: Tensor,
+    pub inertia: Tensor,
+}
+
+impl StaticInputs {
+    /// Through the frozen space (no gradients).
+    pub fn new(space: &Space, h: &History) -> StaticInputs {
+        tch::no_grad(|| {
+            let [g1, g2, _] = &h.garment;
+            let ballistic = g1 * 2.0 - g2;
+            let now = |g: &Tensor| space.encode(g, &h.now.seeds, &h.now.transforms);
+            StaticInputs {
+                static_features: space.static_features(g1, &h.before.seeds),
+                previous_latent: space.encode(g1, &h.before.seeds, &h.before.transforms),
+                inertia: Tensor::cat(&[now(&ballistic), now(g1)], 1),
+            }
+        })
+    }
+
+    /// Frames `idx` of precomputed inputs.
+    pub fn select(&self, idx: &Tensor) -> StaticInputs {
+        StaticInputs {
+            static_features: self.static_features.index_select(0, idx),
+            previous_latent: self.previous_latent.index_select(0, idx),
+            inertia: self.inertia.index_select(0, idx),
+        }
+    }
+}
+
+/// The encoder's inputs from a history (no gradients). `known`: the frozen space's part when
+/// already computed (training precomputes it).
+pub fn motion_inputs(
+    space: &Space,
+    h: &History,
+    sigma: f32,
+    known: Option<StaticInputs>,
+) -> MotionInputs {
+    tch::no_grad(|| {
+        let [g1, g2, g3] = &h.garment;
+        let statics = known.unwrap_or_else(|| StaticInputs::new(space, h));
+        let velocity = (g1 - g2) * h.fps;
+        let acceleration = (g1 - g2 * 2.0 + g3) * h.fps;
+        let follow = (space.follow(g1, &h.before.transforms, &h.now.transforms) - g1) * h.fps;
+        let world = Tensor::cat(&[velocity, acceleration, follow], 2);
+        let (b, v) = (world.size()[0], world.size()[1]);
+        // Row vectors times R: R^T x, the vector in the root's frame.
+        let motion = world
+            .reshape([b, v * 3, 3])
+            .bmm(&h.now.root)
+            .reshape([b, v, MOTION_CHANNELS]);
+        let forces = interaction(g1, h, sigma)
+            .reshape([b, -1, 3])
+            .bmm(&h.now.root);
+        MotionInputs {
+            static_features: statics.static_features,
+            previous_latent: statics.previous_latent,
+            inertia: statics.inertia,
+            motion,
+            forces: forces.reshape([b, v, -1, 3]),
+        }
+    })
+}
+
+/// `a_ij · ReLU(−q_ij) · n_j` with `q_ij = (g_{t−1,i} − b_{t,j}) · n_{t,j}` (previous garment
+/// against the current seeds' tangent planes) and `a_ij = exp(−|g_{t−1,i} − b_{t−1,j}|² / 2σ²)`
+/// (only seeds that were near the vertex push it), `[B, V, N, 3]`.
+fn interaction(g1: &Tensor, h: &History, sigma: f32) -> Tensor {
+    let normals = h.now.normals.unsqueeze(1);
+    let to_now = g1.unsqueeze(2) - h.now.seeds.unsqueeze(1);
+    let q = (&to_now * &normals).sum_dim_intlist(3, false, Kind::Float);
+    let near = (g1.unsqueeze(2) - h.before.seeds.unsqueeze(1))
+        .square()
+        .sum_dim_intlist(3, false, Kind::Float);
+    let a = (-near / (2.0 * (sigma as f64).powi(2))).exp();
+    ((a * (-q).relu() * FORCE_SCALE).unsqueeze(3)) * normals
+}
+
+/// `C` and the residual `E_dyn`.
+pub struct MotionEncoder {
+    pub vs: nn::VarStore,
+    pub shape: MotionShape,
+    /// `C`'s first layer, a 1×1 convolution over the per-vertex channels (motion `[C, 9]`,
+    /// forces `[C, N, 3]`, the layout mask `[C]`, bias `[C]`), applied per vertex and then
+    /// scattered to texels (it commutes with the barycentric scatter, as `S`'s does).
+    c0_motion: Tensor,
+    c0_forces: Tensor,
+    c0_mask: Tensor,
+    c0_bias: Tensor,
+    c: nn::Sequential,
+    encoder: nn::Sequential,
+    encoder_fc: nn::Linear,
+    /// The linear path `W` `[L, 3L + 1]` (see the module's notes).
+    linear: Tensor,
+}
+
+impl MotionEncoder {
+    pub fn new(shape: MotionShape, space: &Space, device: tch::Device) -> MotionEncoder {
+        let vs = nn::VarStore::new(device);
+        let root = vs.root() / "motion";
+        let f = shape.features as i64;
+        let n = space.shape.seeds as i64;
+        let fan_in = (MOTION_CHANNELS + 3 * n + 1) as f64;
+        let bound = 1.0 / fan_in.sqrt();
+        let uniform = nn::Init::Uniform {
+            lo: -bound,
+            up: bound,
+        };
+        let c0 = &root / "c0";
+        let c0_motion = c0.var("motion", &[f, MOTION_CHANNELS], uniform);
+        let c0_forces = c0.var("forces", &[f, n, 3], uniform);
+        let c0_mask = c0.var("mask", &[f], uniform);
+        let c0_bias = c0.var("bias", &[f], uniform);
+        let same = nn::ConvConfig {
+            padding: 1,
+            ..Default::default()
+        };
+        let c = nn::seq()
+            .add(nn::func(|x| x.leaky_relu()))
+            .add(nn::conv2d(&root / "c1", f, f, 3, same))
+            .add(nn::func(|x| x.leaky_relu()));
+        let down = nn::ConvConfig {
+            stride: 2,
+            padding: 1,
+            ..Default::default()
+        };
+        let mut encoder = nn::seq();
+        let mut channels = space.shape.features as i64 + f;
+        for (k, &o) in shape.encoder.iter().enumerate() {
+            encoder = encoder
+                .add(nn::conv2d(&root / "enc" / k, channels, o as i64, 4, down))
+                .add(nn::func(|x| x.leaky_relu()));
+            channels = o as i64;
+        }
+        // Zero: the untrained encoder keeps the previous frame's latent.
+        let zero = nn::LinearConfig {
+            ws_init: nn::Init::Const(0.0),
+            bs_init: Some(nn::Init::Const(0.0)),
+            bias: true,
+        };
+        let encoder_fc = nn::linear(
+            &root / "enc_fc",
+            channels * 4,
+            space.shape.latent as i64,
+            zero,
+        );
+        let l = space.shape.latent as i64;
+        // Starts as "keep the previous latent" until fitted (`init_linear`).
+        let linear = root.var("linear", &[l, 3 * l + 1], nn::Init::Const(0.0));
+        tch::no_grad(|| {
+            linear
+                .narrow(1, 2 * l, l)
+                .copy_(&Tensor::eye(l, (Kind::Float, device)))
+        });
+        MotionEncoder {
+            linear,
+            vs,
+            shape,
+            c0_motion,
+            c0_forces,
+            c0_mask,
+            c0_bias,
+            c,
+            encoder,
+            encoder_fc,
+        }
+    }
+
+    /// `E_t = C(M^{V,V̇}_{t−1}, C_t)` `[B, F, H, W]`.
+    pub fn dynamic_features(&self, space: &Space, x: &MotionInputs) -> Tensor {
+        let per_vertex = x.motion.matmul(&self.c0_motion.tr())
+            + Tensor::einsum(
+                "bvnk,cnk->bvc",
+                &[x.forces.shallow_clone(), self.c0_forces.shallow_clone()],
+                None::<i64>,
+            );
+        let map = space.scatter(&per_vertex);
+        let f = self.shape.features as i64;
+        let first = map
+            + self.c0_mask.reshape([1, f, 1, 1]) * space.layout_mask()
+            + self.c0_bias.reshape([1, f, 1, 1]);
+        self.c.forward(&first)
+    }
+
+    /// `Z_t = W [Z^ball_t, Z^stay_t, Z_{t−1}, 1] + ΔE(S(M^P_{t−1}), E_t)`; `e = None` is the
+    /// virtual sample `E_t = 0` (no relative motion: `Z^ball = Z^stay = Z_{t−1}`).
+    pub fn latent(&self, x: &MotionInputs, e: Option<&Tensor>) -> Tensor {
+        let s = x.static_features.size();
+        let zeros;
+        let (e, inertia) = match e {
+            Some(e) => (e, x.inertia.shallow_clone()),
+            None => {
+                zeros = Tensor::zeros(
+                    [s[0], self.shape.features as i64, s[2], s[3]],
+                    (Kind::Float, x.static_features.device()),
+                );
+                (&zeros, x.previous_latent.repeat([1, 2]))
+            }
+        };
+        let input = Tensor::cat(&[x.static_features.shallow_clone(), e.shallow_clone()], 1);
+        let h = self.encoder.forward(&input).flatten(1, -1);
+        Self::linear_input(&inertia, &x.previous_latent).matmul(&self.linear.tr())
+            + self.encoder_fc.forward(&h)
+    }
+
+    /// `[Z^ball, Z^stay, Z_{t−1}, 1]` `[B, 3L + 1]`.
+    fn linear_input(inertia: &Tensor, previous: &Tensor) -> Tensor {
+        let ones = previous.ones_like().narrow(1, 0, 1);
+        Tensor::cat(
+            &[inertia.shallow_clone(), previous.shallow_clone(), ones],
+            1,
+        )
+    }
+
+    /// Fits the linear path to frames' inputs and their simulated latents `target [F, L]` by
+    /// ridge regression (the penalty a thousandth of the inputs' mean square).
+    pub fn init_linear(&mut self, inertia: &Tensor, previous: &Tensor, target: &Tensor) {
+        tch::no_grad(|| {
+            let x = Self::linear_input(inertia, previous).to_kind(Kind::Double);
+            let n = x.size()[1];
+            let gram = x.tr().matmul(&x);
+            let ridge = gram.diagonal(0, 0, 1).mean(Kind::Double) * 1e-3;
+            let eye = Tensor::eye(n, (Kind::Double, x.device()));
+            let rhs = x.tr().matmul(&target.to_kind(Kind::Double));
+            let w = Tensor::linalg_solve(&(gram + eye * ridge), &rhs, true);
+            self.linear.copy_(&w.tr().to_kind(Kind::Float));
+        });
+    }
+
+    /// Trainable tensors by name, sorted (the file's and Adam's order).
+    pub fn parameters(&self) -> Vec<(String, Tensor)> {
+        super::space::sorted_variables(&self.vs)
+    }
+
+    /// Copies stored values into the parameters (shapes must match).
+    pub fn load_parameters(&mut self, stored: &[(String, Tensor)]) -> anyhow::Result<()> {
+        super::space::load_variables(&mut self.vs, stored)
+    }
+}

@@ -1,0 +1,259 @@
+//! Rolling a dynamic model out over a pose sequence: each frame's prediction is the next
+//! frame's history. Per frame, when the garment crosses the body (the paper's collision loss
+//! `Σ ReLU(−o)`, `o = (g − b)·n` against the nearest posed body vertex, above a threshold), a
+//! residual displacement map `Θ` in UV space (bilinear per vertex, in the vertices' rest frames)
+//! is optimised with Adam for `|G̃ − G|₁ + |ΔG̃ − ΔG|₁ + λ3·L_collision` (λ3 = 100) and the
+//! resolved garment is fed forward (paper Sec. 5.1).
+
+use crate::body::{nearest_offsets, Body};
+use crate::geometry::PointIndex;
+use crate::models::dynamic::motion::{motion_inputs, History};
+use crate::models::dynamic::{BodyFrames, Dynamic, MeshLaplacian, Seeds};
+use crate::rig::JointTransform;
+use anyhow::{bail, Result};
+use serde::Serialize;
+use std::time::Instant;
+use tch::nn::{self, OptimizerConfig};
+use tch::{Kind, Tensor};
+
+/// λ3 of the collision objective.
+pub const LAMBDA_COLLISION: f64 = 100.0;
+
+#[derive(Clone, Debug)]
+pub struct Settings {
+    /// Resolve collisions per frame (the paper's test-time optimisation).
+    pub collision_fix: bool,
+    /// Distance outside the body a vertex must keep (metres): `o` is measured against it.
+    pub margin: f32,
+    /// Optimise only when `Σ ReLU(margin − o)` exceeds this (metres, summed over vertices).
+    pub threshold: f64,
+    pub iterations: usize,
+    pub learning_rate: f64,
+    /// Texels per side of the residual map `Θ`.
+    pub map: i64,
+}
+
+impl Default for Settings {
+    fn default() -> Settings {
+        Settings {
+            collision_fix: true,
+            margin: 0.002,
+            threshold: 0.001,
+            iterations: 20,
+            learning_rate: 0.002,
+            map: 32,
+        }
+    }
+}
+
+/// Where the roll-out starts.
+pub enum Init {
+    /// The rest garment carried to the first pose by the seeds, at rest (zero velocity).
+    Rest,
+    /// This garment as frame 0 (e.g. a simulation's first frame), at rest.
+    Garment(Vec<[f32; 3]>),
+}
+
+/// Milliseconds per phase of one frame, split as the paper does.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct FrameTiming {
+    pub inputs_ms: f64,
+    pub encoder_ms: f64,
+    pub decode_ms: f64,
+    /// Collision check and, when it fires, the optimisation.
+    pub collision_ms: f64,
+    pub collision_iterations: usize,
+}
+
+pub struct Rollout {
+    /// The garment at every frame (frame 0 is the start).
+    pub frames: Vec<Vec<[f32; 3]>>,
+    pub timings: Vec<FrameTiming>,
+    /// Collision loss `Σ ReLU(margin − o)` (metres) per frame before and after the fix.
+    pub collision_before: Vec<f64>,
+    pub collision_after: Vec<f64>,
+}
+
+/// The posed body of one frame for the collision term: points, normals, nearest-point index.
+struct PosedSurface {
+    points: Vec<[f32; 3]>,
+    normals: Vec<[f32; 3]>,
+    index: PointIndex,
+}
+
+impl PosedSurface {
+    fn new(body: &Body, pose: &[JointTransform]) -> Result<PosedSurface> {
+        let skinning = body.skeleton.skinning_matrices(pose);
+        let points = body.skin.skin_points(&body.mesh.positions, &skinning);
+        let normals = body.skin.skin_normals(&body.normals, &skinning);
+        let index = PointIndex::new(&points)?;
+        Ok(PosedSurface {
+            points,
+            normals,
+            index,
+        })
+    }
+}
+
+fn to_points(t: &Tensor) -> Vec<[f32; 3]> {
+    let flat: Vec<f32> = t.reshape([-1]).try_into().unwrap_or_default();
+    flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()
+}
+
+fn to_tensor(points: &[[f32; 3]], device: tch::Device) -> Tensor {
+    let flat: Vec<f32> = points.iter().flatten().copied().collect();
+    Tensor::from_slice(&flat)
+        .reshape([1, -1, 3])
+        .to_device(device)
+}
+
+/// Rolls `model` out over `poses` (at `fps`, the model's rate). `progress` is called after
+/// every frame.
+#[allow(clippy::too_many_arguments)]
+pub fn roll_out(
+    model: &Dynamic,
+    body: &Body,
+    seeds: &Seeds,
+    triangles: &[[u32; 3]],
+    poses: &[Vec<JointTransform>],
+    fps: f64,
+    init: &Init,
+    settings: &Settings,
+    progress: &mut dyn FnMut(usize),
+) -> Result<Rollout> {
+    let encoder = model.motion()?;
+    let space = &model.space;
+    let device = space.consts.rest.device();
+    if poses.is_empty() {
+        bail!("nothing to roll out: the clip has no frames");
+    }
+    let bodies = BodyFrames::new(body, seeds, poses, device);
+    let at = |f: usize| bodies.select(&Tensor::from_slice(&[f as i64]).to_device(device));
+    let first = match init {
+        Init::Rest => tch::no_grad(|| {
+            to_points(&space.skin(&space.consts.rest.unsqueeze(0), &at(0).transforms))
+        }),
+        Init::Garment(g) => g.clone(),
+    };
+    let laplacian = MeshLaplacian::new(triangles, first.len(), device);
+    let mut out = Rollout {
+        frames: vec![first],
+        timings: vec![FrameTiming::default()],
+        collision_before: vec![0.0],
+        collision_after: vec![0.0],
+    };
+    let mut history: Vec<Tensor> = vec![to_tensor(&out.frames[0], device)];
+    progress(0);
+    for t in 1..poses.len() {
+        let mut timing = FrameTiming::default();
+        let clock = Instant::now();
+        let back = |k: usize| history[history.len().saturating_sub(k)].shallow_clone();
+        let h = History {
+            garment: [back(1), back(2), back(3)],
+            before: at(t - 1),
+            now: at(t),
+            fps,
+        };
+        let x = motion_inputs(space, &h, encoder.shape.sigma, None);
+        timing.inputs_ms = ms(clock);
+        let clock = Instant::now();
+        let z = tch::no_grad(|| encoder.latent(&x, Some(&encoder.dynamic_features(space, &x))));
+        timing.encoder_ms = ms(clock);
+        let clock = Instant::now();
+        let canonical = tch::no_grad(|| space.canonical(&z));
+        let garment = tch::no_grad(|| space.skin(&canonical, &h.now.transforms));
+        timing.decode_ms = ms(clock);
+        let clock = Instant::now();
+        let surface = PosedSurface::new(body, &poses[t])?;
+        let (resolved, before, after, iterations) = resolve_collisions(
+            model,
+            &canonical,
+            &garment,
+            &h.now.transforms,
+            &surface,
+            &laplacian,
+            settings,
+        );
+        timing.collision_ms = ms(clock);
+        timing.collision_iterations = iterations;
+        let points = to_points(&resolved);
+        if points.iter().flatten().any(|x| !x.is_finite()) {
+            bail!("the roll-out produced a non-finite vertex at frame {t}");
+        }
+        history.push(resolved);
+        if history.len() > 3 {
+            drop(history.remove(0));
+        }
+        out.frames.push(points);
+        out.timings.push(timing);
+        out.collision_before.push(before);
+        out.collision_after.push(after);
+        progress(t);
+    }
+    Ok(out)
+}
+
+fn ms(since: Instant) -> f64 {
+    since.elapsed().as_secs_f64() * 1e3
+}
+
+/// Each vertex's nearest posed body vertex as tensors: positions and normals `[1, V, 3]`.
+fn nearest_planes(garment: &Tensor, surface: &PosedSurface) -> (Tensor, Tensor) {
+    let points = to_points(garment);
+    let nearest = nearest_offsets(&points, &surface.points, &surface.normals, &surface.index);
+    let pick = |of: &[[f32; 3]]| {
+        let v: Vec<[f32; 3]> = nearest.iter().map(|&(b, _)| of[b as usize]).collect();
+        to_tensor(&v, garment.device())
+    };
+    (pick(&surface.points), pick(&surface.normals))
+}
+
+/// `Σ ReLU(margin − o)` with `o = (g − b)·n`.
+fn collision_loss(g: &Tensor, planes: &(Tensor, Tensor), margin: f32) -> Tensor {
+    let o = ((g - &planes.0) * &planes.1).sum_dim_intlist(2, false, Kind::Float);
+    (-(o - margin as f64)).relu().sum(Kind::Float)
+}
+
+/// The paper's test-time fix: when the collision loss passes the threshold, optimise `Θ` for
+/// `|G̃ − G|₁ + |ΔG̃ − ΔG|₁ + λ3·L_collision`. Returns the garment, the loss before and after,
+/// and the iterations run.
+fn resolve_collisions(
+    model: &Dynamic,
+    canonical: &Tensor,
+    garment: &Tensor,
+    transforms: &Tensor,
+    surface: &PosedSurface,
+    laplacian: &MeshLaplacian,
+    s: &Settings,
+) -> (Tensor, f64, f64, usize) {
+    let planes = nearest_planes(garment, surface);
+    let before = tch::no_grad(|| collision_loss(garment, &planes, s.margin).double_value(&[]));
+    if !s.collision_fix || before <= s.threshold {
+        return (garment.shallow_clone(), before, before, 0);
+    }
+    let space = &model.space;
+    let vs = nn::VarStore::new(garment.device());
+    let theta = vs.root().zeros("theta", &[1, 3, s.map, s.map]);
+    let Ok(mut opt) = nn::Adam::default().build(&vs, s.learning_rate) else {
+        return (garment.shallow_clone(), before, before, 0);
+    };
+    let target_laplacian = tch::no_grad(|| laplacian.of(garment));
+    let resolved = |theta: &Tensor| {
+        let offsets = space.at_vertices(theta);
+        space.skin(&space.offset_canonical(canonical, &offsets), transforms)
+    };
+    for _ in 0..s.iterations {
+        let g = resolved(&theta);
+        let loss = (&g - garment).abs().sum(Kind::Float)
+            + (laplacian.of(&g) - &target_laplacian)
+                .abs()
+                .sum(Kind::Float)
+            + collision_loss(&g, &planes, s.margin) * LAMBDA_COLLISION;
+        opt.zero_grad();
+        loss.backward();
+        opt.step();
+    }
+    let g = tch::no_grad(|| resolved(&theta));
+    let after = tch::no_grad(|| collision_loss(&g, &planes, s.margin).double_value(&[]));
+    (g, before, after, s.iterations)
+}

@@ -1,0 +1,434 @@
+//! Training the dynamic model's motion encoder (stage `dynamic`) on simulated sequences, the
+//! generative space frozen: `L = L_geo + L_Z + λ2·L_reg` over the frame and the virtual sample
+//! `E_t = 0` (paper Sec. 5): `L_geo = |G_t − G*_t|₁ + |G^v − G*_{t−1}|₁`,
+//! `L_Z = |Z_t − Z*_t|₁ + |Z^v − Z*_{t−1}|₁` with `Z*` the frozen static encoder's latents of the
+//! simulated frames, `L_reg = |mean z_t² − 1| + |mean z^v² − 1|`. Histories are the simulated
+//! frames (teacher forcing). L1 terms are means (metres, latent units).
+
+use super::adam::Adam;
+use super::dynamic::{FrameData, Reconstruction};
+use super::{Blowup, Training};
+use crate::models::dynamic::motion::{motion_inputs, History, MotionInputs, StaticInputs};
+use crate::models::dynamic::{Dynamic, MotionEncoder, MotionShape};
+use crate::models::file::{self, KindInfo, ModelFile, MotionEpoch, MotionInfo, MotionTerms};
+use crate::models::Model;
+use anyhow::{bail, Result};
+use std::path::Path;
+use tch::{Device, Kind, Tensor};
+
+pub const LAMBDA_REG: f64 = 0.001;
+/// Learning-rate factor of the fitted linear path.
+const LINEAR_LR: f64 = 0.01;
+
+#[derive(Clone, Debug)]
+pub struct Settings {
+    pub shape: MotionShape,
+    pub epochs: usize,
+    pub batch: usize,
+    pub learning_rate: f64,
+    pub seed: u64,
+    pub device: Device,
+}
+
+/// Each frame's history: the indices of frames `t−1, t−2, t−3`, held at the clip's first frame
+/// (a clip starts at rest relative to its past: zero velocity).
+pub fn history_indices(data: &FrameData, device: Device) -> [Tensor; 3] {
+    let n = data.len();
+    let mut ends = data.clip_starts[1..].to_vec();
+    ends.push(n);
+    let back = |k: usize| -> Vec<i64> {
+        data.clip_starts
+            .iter()
+            .zip(&ends)
+            .flat_map(|(&s, &e)| (s..e).map(move |t| t.saturating_sub(k).max(s) as i64))
+            .collect()
+    };
+    [1, 2, 3].map(|k| Tensor::from_slice(&back(k)).to_device(device))
+}
+
+/// The frozen space's inputs of every frame (teacher-forced histories), in chunks.
+fn static_inputs(
+    space: &crate::models::dynamic::Space,
+    data: &FrameData,
+    history: &[Tensor; 3],
+    fps: f64,
+) -> StaticInputs {
+    let device = data.garment.device();
+    let mut parts = Vec::new();
+    for start in (0..data.len()).step_by(crate::models::PREDICT_CHUNK) {
+        let n = crate::models::PREDICT_CHUNK.min(data.len() - start);
+        let idx = Tensor::arange_start(start as i64, (start + n) as i64, (Kind::Int64, device));
+        parts.push(StaticInputs::new(
+            space,
+            &teacher_history(data, history, &idx, fps),
+        ));
+    }
+    let cat =
+        |f: fn(&StaticInputs) -> &Tensor| Tensor::cat(&parts.iter().map(f).collect::<Vec<_>>(), 0);
+    StaticInputs {
+        static_features: cat(|p| &p.static_features),
+        previous_latent: cat(|p| &p.previous_latent),
+        inertia: cat(|p| &p.inertia),
+    }
+}
+
+/// The simulated history of frames `idx` (teacher forcing) and the body around them.
+fn teacher_history(data: &FrameData, history: &[Tensor; 3], idx: &Tensor, fps: f64) -> History {
+    let back: Vec<Tensor> = history.iter().map(|h| h.index_select(0, idx)).collect();
+    History {
+        garment: std::array::from_fn(|k| data.garment.index_select(0, &back[k])),
+        before: data.body.select(&back[0]),
+        now: data.body.select(idx),
+        fps,
+    }
+}
+
+/// Frames that have a previous frame in their clip (the ones a roll-out predicts).
+fn predicted_frames(data: &FrameData) -> Vec<i64> {
+    let starts = &data.clip_starts;
+    (0..data.len() as i64)
+        .filter(|t| !starts.contains(&(*t as usize)))
+        .collect()
+}
+
+/// Teacher-forced inputs and targets for frames `idx`.
+struct Batch {
+    inputs: MotionInputs,
+    previous: Tensor,
+}
+
+/// The motion-encoder trainer.
+pub struct MotionTrainer {
+    pub file: ModelFile,
+    pub data: FrameData,
+    settings: Settings,
+    adam: Adam,
+    fps: f64,
+    history: [Tensor; 3],
+    frames: Tensor,
+    /// The frozen space's inputs of every frame's step (teacher-forced), and `Z*` of every frame.
+    statics: StaticInputs,
+    latents: Tensor,
+}
+
+impl MotionTrainer {
+    /// Grows `file` (a dynamic model with its space trained) a motion encoder.
+    pub fn new(
+        mut file: ModelFile,
+        data: FrameData,
+        fps: f64,
+        settings: Settings,
+    ) -> Result<MotionTrainer> {
+        if data.len() < 2 || settings.batch == 0 {
+            bail!("nothing to train on: the motion encoder needs clips of at least two frames and a positive --batch");
+        }
+        tch::manual_seed(settings.seed as i64);
+        let device = settings.device;
+        let Model::Dynamic(dynamic) = &mut file.model else {
+            bail!(
+                "this is a PBNS model; --from needs a dynamic model (train-dynamic --stage space)"
+            );
+        };
+        dynamic.space.vs.freeze();
+        let encoder = MotionEncoder::new(settings.shape.clone(), &dynamic.space, device);
+        let fps = fps.max(1.0);
+        let space = &dynamic.space;
+        let history = history_indices(&data, device);
+        let latents = crate::models::predict_chunks(data.len(), |start, n| {
+            let (g, b, m) = data.batch(&data.range(start, n));
+            space.encode(&g, &b, &m)
+        });
+        let statics = static_inputs(space, &data, &history, fps);
+        let frames = Tensor::from_slice(&predicted_frames(&data)).to_device(device);
+        let mut encoder = encoder;
+        let fitted = statics.select(&frames);
+        encoder.init_linear(
+            &fitted.inertia,
+            &fitted.previous_latent,
+            &latents.index_select(0, &frames),
+        );
+        let params = encoder.parameters();
+        let adam = Adam::new(
+            &params
+                .iter()
+                .map(|(n, t)| (n.clone(), t))
+                .collect::<Vec<_>>(),
+        );
+        let info = MotionInfo {
+            shape: settings.shape.clone(),
+            seed: settings.seed,
+            batch: settings.batch,
+            learning_rate: settings.learning_rate,
+            motions: Vec::new(),
+            frames: data.len(),
+            history: Vec::new(),
+        };
+        dynamic.motion = Some(encoder);
+        match &mut file.info.model {
+            KindInfo::Dynamic(d) => {
+                d.motion = Some(MotionInfo {
+                    motions: d.training.motions.clone(),
+                    ..info
+                });
+                if !d.training.stages.iter().any(|s| s == "dynamic") {
+                    d.training.stages.push("dynamic".into());
+                }
+            }
+            KindInfo::Pbns(_) => unreachable!("checked above"),
+        }
+        Ok(MotionTrainer {
+            file,
+            data,
+            settings,
+            adam,
+            fps,
+            history,
+            frames,
+            statics,
+            latents,
+        })
+    }
+
+    pub fn dynamic(&self) -> &Dynamic {
+        match &self.file.model {
+            Model::Dynamic(d) => d,
+            Model::Pbns(_) => unreachable!("a dynamic trainer holds a dynamic model"),
+        }
+    }
+
+    fn encoder(&self) -> &MotionEncoder {
+        self.dynamic().motion.as_ref().expect("set in new")
+    }
+
+    pub fn info(&self) -> &MotionInfo {
+        match &self.file.info.model {
+            KindInfo::Dynamic(d) => d.motion.as_ref().expect("set in new"),
+            KindInfo::Pbns(_) => unreachable!("a dynamic trainer holds a dynamic model"),
+        }
+    }
+
+    fn info_mut(&mut self) -> &mut MotionInfo {
+        match &mut self.file.info.model {
+            KindInfo::Dynamic(d) => d.motion.as_mut().expect("set in new"),
+            KindInfo::Pbns(_) => unreachable!("a dynamic trainer holds a dynamic model"),
+        }
+    }
+
+    fn batch(&self, idx: &Tensor) -> Batch {
+        let previous = self.history[0].index_select(0, idx);
+        let h = teacher_history(&self.data, &self.history, idx, self.fps);
+        Batch {
+            inputs: motion_inputs(
+                &self.dynamic().space,
+                &h,
+                self.settings.shape.sigma,
+                Some(self.statics.select(idx)),
+            ),
+            previous,
+        }
+    }
+
+    /// One optimisation step on frames `idx`: the weighted terms and the batch's mean error (m).
+    fn step(&mut self, idx: &Tensor, lr: f64) -> (MotionTerms, f64) {
+        let batch = self.batch(idx);
+        let (dynamic, encoder) = (self.dynamic(), self.encoder());
+        let space = &dynamic.space;
+        let e = encoder.dynamic_features(space, &batch.inputs);
+        let z = encoder.latent(&batch.inputs, Some(&e));
+        let zv = encoder.latent(&batch.inputs, None);
+        let now = self.data.body.select(idx);
+        let before = self.data.body.select(&batch.previous);
+        let pred = space.skin(&space.canonical(&z), &now.transforms);
+        let pred_v = space.skin(&space.canonical(&zv), &before.transforms);
+        let target = self.data.garment.index_select(0, idx);
+        let target_v = self.data.garment.index_select(0, &batch.previous);
+        let l1 = |a: &Tensor, b: &Tensor| (a - b).abs().mean(Kind::Float);
+        let geometry = l1(&pred, &target);
+        let virtual_geometry = l1(&pred_v, &target_v);
+        let latent = l1(&z, &self.latents.index_select(0, idx));
+        let virtual_latent = l1(&zv, &self.latents.index_select(0, &batch.previous));
+        let reg = |z: &Tensor| {
+            (z.square().mean_dim(1, false, Kind::Float) - 1.0)
+                .abs()
+                .mean(Kind::Float)
+        };
+        let regulariser = (reg(&z) + reg(&zv)) * LAMBDA_REG;
+        let loss = &geometry + &virtual_geometry + &latent + &virtual_latent + &regulariser;
+        loss.backward();
+        let err = tch::no_grad(|| {
+            vertex_distance(&pred, &target)
+                .mean(Kind::Float)
+                .double_value(&[])
+        });
+        let (names, params): (Vec<String>, Vec<Tensor>) = encoder.parameters().into_iter().unzip();
+        // The fitted linear path moves slowly (as the space's does).
+        let lrs: Vec<f64> = names
+            .iter()
+            .map(|n| {
+                if n.ends_with(".linear") {
+                    lr * LINEAR_LR
+                } else {
+                    lr
+                }
+            })
+            .collect();
+        self.adam.update(&params, &lrs);
+        let v = |t: &Tensor| t.double_value(&[]);
+        (
+            MotionTerms {
+                geometry: v(&geometry),
+                virtual_geometry: v(&virtual_geometry),
+                latent: v(&latent),
+                virtual_latent: v(&virtual_latent),
+                regulariser: v(&regulariser),
+            },
+            err,
+        )
+    }
+
+    /// Cosine decay from the learning rate to a tenth of it.
+    fn learning_rate(&self, epoch: usize) -> f64 {
+        let t = (epoch as f64 / (self.settings.epochs.max(2) - 1) as f64).min(1.0);
+        self.settings.learning_rate * (0.1 + 0.9 * 0.5 * (1.0 + (std::f64::consts::PI * t).cos()))
+    }
+}
+
+/// Per-vertex L2 distance `[B, V]`.
+pub fn vertex_distance(a: &Tensor, b: &Tensor) -> Tensor {
+    (a - b)
+        .square()
+        .sum_dim_intlist(2, false, Kind::Float)
+        .sqrt()
+}
+
+/// One-step predictions (teacher-forced histories) of every frame that has a previous frame in
+/// its clip, against the simulation.
+pub fn one_step(dynamic: &Dynamic, data: &FrameData, fps: f64) -> Result<Reconstruction> {
+    let encoder = dynamic.motion()?;
+    let space = &dynamic.space;
+    let history = history_indices(data, space.consts.rest.device());
+    let frames = predicted_frames(data);
+    let idx_all = Tensor::from_slice(&frames).to_device(space.consts.rest.device());
+    let pred = crate::models::predict_chunks(frames.len(), |s, n| {
+        let idx = idx_all.narrow(0, s as i64, n as i64);
+        let h = teacher_history(data, &history, &idx, fps);
+        let x = motion_inputs(space, &h, encoder.shape.sigma, None);
+        let z = encoder.latent(&x, Some(&encoder.dynamic_features(space, &x)));
+        space.skin(&space.canonical(&z), &h.now.transforms)
+    });
+    let truth = data.garment.index_select(0, &idx_all);
+    Ok(Reconstruction::of(&pred, &truth))
+}
+
+impl Training for MotionTrainer {
+    type Record = MotionEpoch;
+
+    fn epochs_done(&self) -> usize {
+        self.info().history.len()
+    }
+
+    fn run_epoch(&mut self) -> Result<MotionEpoch, Blowup> {
+        let epoch = self.epochs_done();
+        tch::manual_seed(
+            (self.settings.seed as i64)
+                .wrapping_mul(1_000_003)
+                .wrapping_add(epoch as i64),
+        );
+        let lr = self.learning_rate(epoch);
+        let n = self.frames.size()[0];
+        let order = self
+            .frames
+            .index_select(0, &Tensor::randperm(n, (Kind::Int64, self.settings.device)));
+        let batch = self.settings.batch as i64;
+        let mut sum = MotionTerms::default();
+        let (mut err, mut steps) = (0.0, 0usize);
+        for (step, start) in (0..n).step_by(batch as usize).enumerate() {
+            let idx = order.narrow(0, start, batch.min(n - start));
+            let (t, e) = self.step(&idx, lr);
+            Blowup::check(
+                &[
+                    ("geometry", t.geometry),
+                    ("virtual geometry", t.virtual_geometry),
+                    ("latent", t.latent),
+                    ("virtual latent", t.virtual_latent),
+                ],
+                epoch,
+                step,
+            )?;
+            sum.geometry += t.geometry;
+            sum.virtual_geometry += t.virtual_geometry;
+            sum.latent += t.latent;
+            sum.virtual_latent += t.virtual_latent;
+            sum.regulariser += t.regulariser;
+            err += e;
+            steps += 1;
+        }
+        let k = steps.max(1) as f64;
+        let terms = MotionTerms {
+            geometry: sum.geometry / k,
+            virtual_geometry: sum.virtual_geometry / k,
+            latent: sum.latent / k,
+            virtual_latent: sum.virtual_latent / k,
+            regulariser: sum.regulariser / k,
+        };
+        let record = MotionEpoch {
+            epoch: epoch + 1,
+            loss: terms.total(),
+            terms,
+            learning_rate: lr,
+            train_mean_mm: 1e3 * err / k,
+        };
+        self.info_mut().history.push(record.clone());
+        Ok(record)
+    }
+
+    fn save(&mut self, path: &Path, checkpoint: bool) -> Result<()> {
+        self.file.extra = if checkpoint {
+            let p = self.encoder().parameters();
+            self.adam
+                .state(&p.iter().map(|(n, t)| (n.clone(), t)).collect::<Vec<_>>())
+        } else {
+            Vec::new()
+        };
+        file::save(path, &self.file)
+    }
+
+    fn resume(&mut self, path: &Path) -> Result<()> {
+        let checkpoint = file::load(path, self.settings.device)?;
+        let theirs = checkpoint.info.dynamic()?;
+        let (Some(theirs_motion), Ok(dynamic)) = (&theirs.motion, checkpoint.dynamic()) else {
+            bail!(
+                "{}: checkpoint has no motion encoder; start without --resume",
+                path.display()
+            );
+        };
+        let mine = self.info();
+        if theirs_motion.shape != mine.shape
+            || theirs_motion.seed != mine.seed
+            || theirs_motion.motions != mine.motions
+            || checkpoint.info.garment.rest_hash != self.file.info.garment.rest_hash
+        {
+            bail!("{}: checkpoint was made with other inputs or settings (garment, clips, seed); start without --resume", path.display());
+        }
+        let history = theirs_motion.history.clone();
+        let stored = dynamic.motion()?.parameters();
+        let Model::Dynamic(d) = &mut self.file.model else {
+            unreachable!("a dynamic trainer holds a dynamic model")
+        };
+        d.motion
+            .as_mut()
+            .expect("set in new")
+            .load_parameters(&stored)?;
+        let p = self.encoder().parameters();
+        self.adam.restore(
+            &p.iter().map(|(n, t)| (n.clone(), t)).collect::<Vec<_>>(),
+            &checkpoint.extra,
+        )?;
+        self.info_mut().history = history;
+        Ok(())
+    }
+
+    fn describe(r: &MotionEpoch) -> String {
+        format!("loss {:.4} one-step mean {:.1} mm", r.loss, r.train_mean_mm)
+    }
+}
