@@ -4,7 +4,7 @@ use super::args::{OutputArgs, TrainInputs, TRAIN_DEFAULTS};
 use super::Execute;
 use crate::models::file::EpochRecord;
 use crate::train::pbns::{PhaseSplit, Trainer};
-use crate::train::{fit, FitOptions, Fitted, Training};
+use crate::train::{fit, CheckpointEvery, FitOptions, Fitted, Training};
 use anyhow::Result;
 use serde::Serialize;
 use std::path::PathBuf;
@@ -19,7 +19,13 @@ use std::path::PathBuf;
 /// `garmentbake eval` on other clips: a clip used to choose settings (epochs, fabric, width) is a
 /// validation clip; only a clip used for nothing is a test clip. The model file (.safetensors) is self-contained:
 /// `garmentbake eval`, `bake` and `inspect` need nothing else. A checkpoint with the optimizer
-/// state is written next to it every epoch (NAME.ckpt.safetensors); `--resume` continues from it.
+/// state is written next to it (NAME.ckpt.safetensors) on `--checkpoint-every` and after the last
+/// epoch; `--resume` continues from it exactly as if the run had not stopped (with the same
+/// `--epochs`: the learning-rate schedule spans them).
+///
+/// The report ends with where the wall time went: optimisation steps (and their split into
+/// forward, losses, nearest neighbour, backward), validation, candidate refresh, checkpoints,
+/// logging; `--log` has the same per epoch.
 #[derive(clap::Args)]
 pub struct Args {
     #[command(flatten)]
@@ -33,6 +39,11 @@ pub struct Args {
     /// Continue from OUT's checkpoint (same inputs and settings) up to --epochs.
     #[arg(long)]
     pub resume: bool,
+    /// Write the checkpoint after this many epochs (50), this much wall time (300s, 5m) or
+    /// whichever comes first (50,5m); always after the last epoch. A checkpoint of a wide model
+    /// holds tens of MB of optimizer state, so writing one every epoch costs real time.
+    #[arg(long, default_value = "5m", value_name = "EPOCHS|SECONDSs|MINUTESm")]
+    pub checkpoint_every: CheckpointEvery,
     /// Treat input warnings (garment inside the body, bad faces) as errors.
     #[arg(long)]
     pub strict: bool,
@@ -81,6 +92,7 @@ impl Execute for Args {
             out: &self.out,
             quiet: self.output.json,
             log: self.log.as_deref(),
+            checkpoint_every: self.checkpoint_every,
         };
         let fitted = fit(&mut trainer, &opts)?;
         let p = &trainer.poses;
@@ -112,10 +124,14 @@ impl Execute for Args {
             }
         }
         println!("{}", r.phases);
+        println!("{}", r.fitted.wall);
         println!(
-            "wrote {} ({:.0} s)",
+            "wrote {} ({:.0} s); {} checkpoint(s), the last after epoch {}: {}",
             r.fitted.out.display(),
-            r.fitted.seconds
+            r.fitted.seconds,
+            r.fitted.checkpoints,
+            r.fitted.checkpoint_epoch,
+            r.fitted.checkpoint.display()
         );
     }
 }

@@ -106,6 +106,45 @@ impl Pbns {
         out
     }
 
+    /// A detached copy of the trainable tensors (`weights`: with the slot logits), named as
+    /// [`Pbns::parameters`] names them.
+    pub fn snapshot(&self, weights: bool) -> Vec<(String, Tensor)> {
+        self.parameters(weights)
+            .into_iter()
+            .map(|(n, t)| (n, t.detach().copy()))
+            .collect()
+    }
+
+    /// This model with the tensors of `snapshot` in place of its own (no gradients): the model
+    /// as it was when the snapshot was taken.
+    pub fn with_snapshot(&self, snapshot: &[(String, Tensor)]) -> Pbns {
+        let find = |name: &str, own: &Tensor| {
+            snapshot
+                .iter()
+                .find(|(n, _)| n == name)
+                .map_or_else(|| own.detach(), |(_, t)| t.detach())
+        };
+        Pbns {
+            shape: self.shape,
+            feature_joints: self.feature_joints.clone(),
+            mlp: self
+                .mlp
+                .iter()
+                .enumerate()
+                .map(|(i, (w, b))| {
+                    (
+                        find(&format!("mlp.{i}.weight"), w),
+                        find(&format!("mlp.{i}.bias"), b),
+                    )
+                })
+                .collect(),
+            psd: find("psd", &self.psd),
+            template: self.template.shallow_clone(),
+            joints: self.joints.shallow_clone(),
+            logits: find("W.logits", &self.logits),
+        }
+    }
+
     /// Turns gradient tracking on for the trainable tensors.
     pub fn set_trainable(&mut self, weights: bool) {
         for (w, b) in &mut self.mlp {

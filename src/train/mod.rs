@@ -27,6 +27,22 @@ pub trait Training {
     fn resume(&mut self, checkpoint: &Path) -> Result<()>;
     /// A short line for the progress bar.
     fn describe(record: &Self::Record) -> String;
+    /// Seconds spent so far inside `run_epoch` on validation and candidate upkeep (the rest is
+    /// optimisation steps); a trainer without such phases keeps the default.
+    fn phases(&self) -> TrainerPhases {
+        TrainerPhases::default()
+    }
+    /// Why training should stop now (early stopping), checked after every epoch.
+    fn stop_reason(&self) -> Option<String> {
+        None
+    }
+}
+
+/// Cumulative seconds a trainer spent on work beside its optimisation steps.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TrainerPhases {
+    pub validation: f64,
+    pub refresh: f64,
 }
 
 /// The loss became NaN or infinite.
@@ -62,6 +78,106 @@ pub struct FitOptions<'a> {
     pub quiet: bool,
     /// Append one JSON object per epoch to this file (JSON lines).
     pub log: Option<&'a Path>,
+    /// When a checkpoint is written (always after the last epoch too).
+    pub checkpoint_every: CheckpointEvery,
+}
+
+/// A checkpoint after this many epochs or this much wall time since the last one, whichever
+/// comes first; `--checkpoint-every 50`, `300s`, `5m` or `50,5m`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct CheckpointEvery {
+    pub epochs: Option<usize>,
+    pub seconds: Option<f64>,
+}
+
+impl CheckpointEvery {
+    /// After every epoch (what the dynamic trainer does: its checkpoints are small).
+    pub const EPOCH: CheckpointEvery = CheckpointEvery {
+        epochs: Some(1),
+        seconds: None,
+    };
+
+    fn due(&self, epochs_since: usize, seconds_since: f64) -> bool {
+        self.epochs.is_some_and(|e| epochs_since >= e)
+            || self.seconds.is_some_and(|s| seconds_since >= s)
+    }
+}
+
+impl std::str::FromStr for CheckpointEvery {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        let mut every = CheckpointEvery {
+            epochs: None,
+            seconds: None,
+        };
+        for part in s.split(',').map(str::trim) {
+            let (number, unit) = match part.strip_suffix('s') {
+                Some(n) => (n, 1.0),
+                None => match part.strip_suffix('m') {
+                    Some(n) => (n, 60.0),
+                    None => (part, 0.0),
+                },
+            };
+            let bad = || {
+                format!(
+                    "'{part}': expected epochs (50), seconds (300s) or minutes (5m), e.g. 50,5m"
+                )
+            };
+            if unit == 0.0 {
+                let e: usize = number.parse().map_err(|_| bad())?;
+                if e == 0 {
+                    return Err(bad());
+                }
+                every.epochs = Some(e);
+            } else {
+                let v: f64 = number.parse().map_err(|_| bad())?;
+                if !(v.is_finite() && v > 0.0) {
+                    return Err(bad());
+                }
+                every.seconds = Some(v * unit);
+            }
+        }
+        Ok(every)
+    }
+}
+
+/// Where the loop's wall time went (seconds).
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct WallSplit {
+    /// Optimisation steps (forward, losses, backward, the optimiser).
+    pub steps: f64,
+    /// Exact metrics on the validation poses.
+    pub validation: f64,
+    /// Candidate upkeep on the training thread (snapshots, installs, synchronous refreshes).
+    pub refresh: f64,
+    pub checkpoint: f64,
+    pub logging: f64,
+    /// The final model, the progress bar and the rest of the loop.
+    pub other: f64,
+}
+
+impl WallSplit {
+    pub fn total(&self) -> f64 {
+        self.steps + self.validation + self.refresh + self.checkpoint + self.logging + self.other
+    }
+}
+
+impl std::fmt::Display for WallSplit {
+    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        let total = self.total().max(1e-12);
+        let part = |name: &str, s: f64| format!("{name} {s:.1} s ({:.1} %)", 100.0 * s / total);
+        write!(
+            f,
+            "wall {total:.1} s: {}, {}, {}, {}, {}, {}",
+            part("steps", self.steps),
+            part("validation", self.validation),
+            part("candidate refresh", self.refresh),
+            part("checkpoints", self.checkpoint),
+            part("logging", self.logging),
+            part("other", self.other)
+        )
+    }
 }
 
 /// What the loop did.
@@ -73,6 +189,12 @@ pub struct Fitted {
     pub seconds: f64,
     /// Wall time spent writing checkpoints.
     pub checkpoint_seconds: f64,
+    /// Checkpoints written, and the epoch of the last one.
+    pub checkpoints: usize,
+    pub checkpoint_epoch: usize,
+    pub wall: WallSplit,
+    /// Why training stopped before `epochs`, if it did.
+    pub stopped_early: Option<String>,
 }
 
 /// `runs/skirt.safetensors` → `runs/skirt.ckpt.safetensors`.
@@ -83,8 +205,9 @@ pub fn checkpoint_path(out: &Path) -> PathBuf {
     out.with_file_name(format!("{stem}.ckpt.safetensors"))
 }
 
-/// Trains up to `opts.epochs`: a checkpoint after every epoch, the final model at `opts.out`.
-/// A blow-up stops with an error that says which checkpoint survives.
+/// Trains up to `opts.epochs`: a checkpoint on `opts.checkpoint_every` and after the last
+/// epoch, the final model at `opts.out`. A blow-up stops with an error that says which checkpoint
+/// survives.
 pub fn fit<T: Training>(trainer: &mut T, opts: &FitOptions) -> Result<Fitted> {
     let started = Instant::now();
     if let Some(dir) = opts.out.parent().filter(|d| !d.as_os_str().is_empty()) {
@@ -97,33 +220,86 @@ pub fn fit<T: Training>(trainer: &mut T, opts: &FitOptions) -> Result<Fitted> {
         "epochs",
         opts.quiet,
     );
-    let mut checkpoint_seconds = 0.0;
+    let mut wall = WallSplit::default();
+    // A resumed run starts from a checkpoint.
+    let (mut checkpoints, mut checkpoint_epoch) = (0, trainer.epochs_done());
+    let mut since_checkpoint = (trainer.epochs_done(), Instant::now());
+    let mut stopped_early = None;
     while trainer.epochs_done() < opts.epochs {
+        let before = trainer.phases();
         let epoch_start = Instant::now();
         let record = trainer.run_epoch().map_err(|b| {
             bar.abandon();
-            blown_up(b, trainer.epochs_done(), &ckpt)
+            blown_up(b, trainer.epochs_done(), checkpoint_epoch, &ckpt)
         })?;
-        let save_start = Instant::now();
-        trainer.save(&ckpt, true)?;
-        let save_s = save_start.elapsed().as_secs_f64();
-        checkpoint_seconds += save_s;
+        let epoch_s = epoch_start.elapsed().as_secs_f64();
+        let after = trainer.phases();
+        let split = EpochSplit {
+            seconds: epoch_s,
+            validation_seconds: after.validation - before.validation,
+            refresh_seconds: after.refresh - before.refresh,
+            checkpoint_seconds: 0.0,
+        };
+        wall.validation += split.validation_seconds;
+        wall.refresh += split.refresh_seconds;
+        wall.steps += epoch_s - split.validation_seconds - split.refresh_seconds;
+        stopped_early = trainer.stop_reason();
+        let last = trainer.epochs_done() >= opts.epochs || stopped_early.is_some();
+        let due = opts.checkpoint_every.due(
+            trainer.epochs_done() - since_checkpoint.0,
+            since_checkpoint.1.elapsed().as_secs_f64(),
+        );
+        let split = if due || last {
+            let save_start = Instant::now();
+            trainer.save(&ckpt, true)?;
+            let save_s = save_start.elapsed().as_secs_f64();
+            wall.checkpoint += save_s;
+            checkpoints += 1;
+            checkpoint_epoch = trainer.epochs_done();
+            since_checkpoint = (checkpoint_epoch, Instant::now());
+            EpochSplit {
+                checkpoint_seconds: save_s,
+                ..split
+            }
+        } else {
+            split
+        };
+        let log_start = Instant::now();
         bar.set_message(T::describe(&record));
         bar.inc(1);
         if let Some((path, w)) = &mut log {
-            let line = log_line(&record, epoch_start.elapsed().as_secs_f64(), save_s)?;
+            let line = log_line(&record, &split)?;
             writeln!(w, "{line}").with_context(|| format!("writing {}", path.display()))?;
+        }
+        wall.logging += log_start.elapsed().as_secs_f64();
+        if stopped_early.is_some() {
+            break;
         }
     }
     bar.finish_and_clear();
     trainer.save(opts.out, false)?;
+    let seconds = started.elapsed().as_secs_f64();
+    wall.other = (seconds - wall.total()).max(0.0);
     Ok(Fitted {
         out: opts.out.to_path_buf(),
         checkpoint: ckpt,
         epochs: trainer.epochs_done(),
-        seconds: started.elapsed().as_secs_f64(),
-        checkpoint_seconds,
+        seconds,
+        checkpoint_seconds: wall.checkpoint,
+        checkpoints,
+        checkpoint_epoch,
+        wall,
+        stopped_early,
     })
+}
+
+/// One epoch's wall time and its parts beside the steps, as the JSON log records them.
+#[derive(Clone, Copy, Debug, Serialize)]
+struct EpochSplit {
+    seconds: f64,
+    validation_seconds: f64,
+    refresh_seconds: f64,
+    checkpoint_seconds: f64,
 }
 
 type Log = (PathBuf, std::io::LineWriter<std::fs::File>);
@@ -134,24 +310,27 @@ fn open_log(path: &Path) -> Result<Log> {
     Ok((path.to_path_buf(), std::io::LineWriter::new(file)))
 }
 
-/// The record with the epoch's wall time and checkpoint time added.
-fn log_line(record: &impl Serialize, seconds: f64, checkpoint: f64) -> Result<String> {
+/// The record with the epoch's wall split added.
+fn log_line(record: &impl Serialize, split: &EpochSplit) -> Result<String> {
     let mut v = serde_json::to_value(record)?;
-    if let Some(map) = v.as_object_mut() {
-        map.insert("seconds".into(), seconds.into());
-        map.insert("checkpoint_seconds".into(), checkpoint.into());
+    if let (Some(map), serde_json::Value::Object(times)) =
+        (v.as_object_mut(), serde_json::to_value(split)?)
+    {
+        map.extend(times);
     }
     Ok(v.to_string())
 }
 
-fn blown_up(b: Blowup, epochs_done: usize, ckpt: &Path) -> anyhow::Error {
-    let kept = if epochs_done > 0 {
+fn blown_up(b: Blowup, epochs_done: usize, checkpoint_epoch: usize, ckpt: &Path) -> anyhow::Error {
+    let kept = if epochs_done == 0 {
+        "no epoch finished, so there is no checkpoint".to_string()
+    } else if checkpoint_epoch > 0 {
         format!(
-            "the checkpoint of epoch {epochs_done} is kept: {}",
+            "the checkpoint of epoch {checkpoint_epoch} is kept: {}",
             ckpt.display()
         )
     } else {
-        "no epoch finished, so there is no checkpoint".to_string()
+        format!("no checkpoint was written in the {epochs_done} epochs done (--checkpoint-every)")
     };
     anyhow::anyhow!("{b}; {kept} (lower --lr or the fabric's λ for that term, then --resume)")
 }

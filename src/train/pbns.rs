@@ -5,7 +5,7 @@ use super::adam::Adam;
 use super::losses::{self, Cloth, TERM_NAMES};
 use super::nearest::{self, Correspondences};
 use super::poses::{self, PoseSet};
-use super::{Blowup, Training};
+use super::{Blowup, TrainerPhases, Training};
 use crate::body::{Body, PosedBody};
 use crate::fabric::Fabric;
 use crate::garment::Garment;
@@ -332,9 +332,24 @@ pub struct Trainer {
     geometry: ClothGeometry,
     adam: Adam,
     refreshed: bool,
-    /// A candidate refresh running on a worker thread, applied at the next epoch.
-    pending: Option<std::thread::JoinHandle<Vec<i64>>>,
+    /// The weights the installed candidate lists were computed from (for exact resume).
+    installed: Snapshot,
+    /// A candidate refresh running on a worker thread, applied at the next due epoch.
+    pending: Option<PendingRefresh>,
 }
+
+/// Named trainable tensors of the model at some epoch.
+type Snapshot = Vec<(String, Tensor)>;
+
+/// A refresh on a worker thread and the weights whose output it queries.
+struct PendingRefresh {
+    job: std::thread::JoinHandle<Vec<i64>>,
+    snapshot: Snapshot,
+}
+
+/// Checkpoint tensor name prefixes of the installed and the pending refresh's snapshots.
+const INSTALLED: &str = "refresh.installed.";
+const PENDING: &str = "refresh.pending.";
 
 impl Trainer {
     /// Builds the pose set, the model (proximity weights) and all precomputed tensors.
@@ -454,6 +469,7 @@ impl Trainer {
             correspondences,
             adam,
             refreshed: false,
+            installed: Vec::new(),
             pending: None,
         })
     }
@@ -518,11 +534,6 @@ impl Trainer {
         s.learning_rate * f
     }
 
-    /// Garment positions of every training pose (no gradients).
-    fn predict_train(&self) -> Vec<Vec<[f32; 3]>> {
-        self.model().predict_points(&self.train)
-    }
-
     /// Candidate upkeep at the start of an epoch. Every `refresh_every` epochs the model's
     /// output is snapshot and the k-d trees are queried on a worker thread while training goes
     /// on; the lists are installed at the next due epoch, so the worker has `refresh_every`
@@ -556,32 +567,61 @@ impl Trainer {
         self.times.refresh += t.elapsed();
     }
 
+    /// The current weights, as a refresh sees them.
+    fn snapshot(&self) -> Snapshot {
+        self.model().snapshot(self.settings.train_weights)
+    }
+
     /// New nearest-body-vertex candidate lists from the model's current output, now.
     pub fn refresh(&mut self) {
-        let x = self.predict_train();
-        self.correspondences.refresh(&x);
-        self.refreshed = true;
+        let snapshot = self.snapshot();
+        self.refresh_from(snapshot, false);
     }
 
     /// The same by brute force on the device (see [`Correspondences::refresh_dense`]).
     pub fn refresh_dense(&mut self) {
-        let x = self.model().predict(&self.train);
-        self.correspondences.refresh_dense(&x);
+        let snapshot = self.snapshot();
+        self.refresh_from(snapshot, true);
+    }
+
+    /// Installs candidate lists computed now from the output of the weights `snapshot`.
+    fn refresh_from(&mut self, snapshot: Snapshot, dense: bool) {
+        let model = self.model().with_snapshot(&snapshot);
+        if dense {
+            self.correspondences
+                .refresh_dense(&model.predict(&self.train));
+        } else {
+            self.correspondences
+                .refresh(&model.predict_points(&self.train));
+        }
+        self.installed = snapshot;
         self.refreshed = true;
     }
 
     /// Starts a refresh on a worker thread (see [`Trainer::upkeep`]); `finish_refresh` installs it.
     pub fn start_refresh(&mut self) {
-        let x = self.predict_train();
-        self.pending = Some(self.correspondences.spawn_refresh(x));
+        let snapshot = self.snapshot();
+        self.start_refresh_from(snapshot);
+    }
+
+    fn start_refresh_from(&mut self, snapshot: Snapshot) {
+        let x = self
+            .model()
+            .with_snapshot(&snapshot)
+            .predict_points(&self.train);
+        self.pending = Some(PendingRefresh {
+            job: self.correspondences.spawn_refresh(x),
+            snapshot,
+        });
     }
 
     /// Waits for a pending refresh and installs it; returns whether there was one.
     pub fn finish_refresh(&mut self) -> bool {
         match self.pending.take() {
-            Some(job) => {
-                let lists = job.join().expect("candidate refresh worker panicked");
+            Some(p) => {
+                let lists = p.job.join().expect("candidate refresh worker panicked");
                 self.correspondences.apply(lists);
+                self.installed = p.snapshot;
                 true
             }
             None => false,
@@ -704,11 +744,23 @@ impl Trainer {
         &self.file
     }
 
-    /// Writes the model; with `checkpoint`, the Adam state too (for `--resume`).
+    /// Writes the model; with `checkpoint`, the Adam state and the weights the candidate lists
+    /// (installed and pending) come from too, so `--resume` continues exactly.
     pub fn save(&mut self, path: &Path, checkpoint: bool) -> Result<()> {
         self.file.extra = if checkpoint {
-            self.adam
-                .state(&self.model().parameters(self.settings.train_weights))
+            let mut extra = self
+                .adam
+                .state(&self.model().parameters(self.settings.train_weights));
+            let named = |prefix: &str, s: &Snapshot| {
+                s.iter()
+                    .map(|(n, t)| (format!("{prefix}{n}"), t.shallow_clone()))
+                    .collect::<Vec<_>>()
+            };
+            extra.extend(named(INSTALLED, &self.installed));
+            if let Some(p) = &self.pending {
+                extra.extend(named(PENDING, &p.snapshot));
+            }
+            extra
         } else {
             Vec::new()
         };
@@ -749,7 +801,27 @@ impl Trainer {
         let info = self.info_mut();
         info.history = history;
         info.training.epochs = info.history.len();
+        self.pending = None;
         self.refreshed = false;
+        // The candidate lists as the interrupted run had them (an older checkpoint without the
+        // snapshots gets fresh lists at the first epoch instead).
+        let snapshot = |prefix: &str| -> Snapshot {
+            checkpoint
+                .extra
+                .iter()
+                .filter_map(|(n, t)| {
+                    n.strip_prefix(prefix)
+                        .map(|n| (n.to_string(), t.to_device(self.settings.device)))
+                })
+                .collect()
+        };
+        let (installed, pending) = (snapshot(INSTALLED), snapshot(PENDING));
+        if !installed.is_empty() {
+            self.refresh_from(installed, self.settings.dense_refresh());
+        }
+        if !pending.is_empty() {
+            self.start_refresh_from(pending);
+        }
         Ok(())
     }
 }
@@ -776,6 +848,13 @@ impl Training for Trainer {
 
     fn resume(&mut self, checkpoint: &Path) -> Result<()> {
         Trainer::resume(self, checkpoint)
+    }
+
+    fn phases(&self) -> TrainerPhases {
+        TrainerPhases {
+            validation: self.times.validation.as_secs_f64(),
+            refresh: self.times.refresh.as_secs_f64(),
+        }
     }
 
     fn describe(line: &EpochLine) -> String {

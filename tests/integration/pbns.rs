@@ -14,6 +14,7 @@ use garmentbake::models::pose_features::tensor_points;
 use garmentbake::motion::load_clip;
 use garmentbake::train::losses::{collision, Cloth};
 use garmentbake::train::pbns::{Inputs, Settings, Trainer};
+use garmentbake::train::{fit, CheckpointEvery, FitOptions, Training};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::{Mutex, OnceLock};
@@ -42,6 +43,11 @@ fn tmp(name: &str) -> PathBuf {
 
 /// A tiny training of the skirt: a few poses of one clip, width 16.
 fn tiny_trainer(seed: u64) -> Trainer {
+    tiny_trainer_for(seed, 2)
+}
+
+/// The same with `epochs` in the learning-rate schedule.
+fn tiny_trainer_for(seed: u64, epochs: usize) -> Trainer {
     let b = body().clone();
     let clip = load_clip(&sample("motions/131_01.bvh"), &[], &b.skeleton, Some(30.0)).unwrap();
     let inputs = Inputs {
@@ -52,7 +58,7 @@ fn tiny_trainer(seed: u64) -> Trainer {
         motion_names: vec!["131_01.bvh".into()],
     };
     let settings = Settings {
-        epochs: 2,
+        epochs,
         batch: 4,
         width: 16,
         seed,
@@ -537,6 +543,66 @@ fn resume_continues_from_the_checkpoint_and_inspect_prints_the_model() {
     let r = tiny_train_cli(&out, &["--epochs", "3", "--resume", "--seed", "9"]);
     assert_eq!(r.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&r.stderr).contains("checkpoint was made with other inputs"));
+}
+
+#[test]
+fn an_interrupted_run_resumed_from_its_checkpoint_ends_with_the_same_tensors() {
+    // 5 epochs in one go vs 3, stop, --resume for the other 2. Epoch 3 is mid refresh cycle
+    // (every 2 epochs): the resumed run must rebuild both the installed candidate lists and the
+    // pending refresh from the weights they came from, besides the weights and Adam's state.
+    let _g = serial();
+    let run = |trainer: &mut Trainer, epochs: usize, out: &Path| {
+        let opts = FitOptions {
+            epochs,
+            out,
+            quiet: true,
+            log: None,
+            checkpoint_every: CheckpointEvery {
+                epochs: Some(3),
+                seconds: None,
+            },
+        };
+        fit(trainer, &opts).unwrap()
+    };
+    let mut whole = tiny_trainer_for(4, 5);
+    let fitted = run(&mut whole, 5, &tmp("whole.safetensors"));
+    assert_eq!((fitted.checkpoints, fitted.checkpoint_epoch), (2, 5));
+    let out = tmp("interrupted.safetensors");
+    let fitted = run(&mut tiny_trainer_for(4, 5), 3, &out);
+    assert_eq!((fitted.epochs, fitted.checkpoint_epoch), (3, 3));
+    let mut resumed = tiny_trainer_for(4, 5);
+    resumed.resume(&fitted.checkpoint).unwrap();
+    assert_eq!(resumed.epochs_done(), 3);
+    run(&mut resumed, 5, &out);
+    let (a, b) = (whole.model(), resumed.model());
+    for ((name, x), (_, y)) in a.parameters(true).iter().zip(b.parameters(true)) {
+        assert!(x.equal(y), "{name} differs after resume");
+    }
+    let losses = |t: &Trainer| -> Vec<f64> { t.info().history.iter().map(|e| e.loss).collect() };
+    assert_eq!(losses(&whole), losses(&resumed));
+}
+
+#[test]
+fn checkpoint_intervals_parse_and_bad_ones_are_one_line_errors() {
+    let every = |s: &str| s.parse::<CheckpointEvery>();
+    assert_eq!(
+        every("50,5m"),
+        Ok(CheckpointEvery {
+            epochs: Some(50),
+            seconds: Some(300.0)
+        })
+    );
+    assert_eq!(every("90s").unwrap().seconds, Some(90.0));
+    for bad in ["0", "5h", "-3s", ""] {
+        assert!(every(bad).is_err(), "{bad}");
+    }
+    let r = tiny_train_cli(&tmp("never.safetensors"), &["--checkpoint-every", "5h"]);
+    assert_eq!(r.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(
+        err.contains("'5h'") && err.contains("--checkpoint-every"),
+        "{err}"
+    );
 }
 
 #[test]
