@@ -4,7 +4,7 @@ use super::args::{OutputArgs, TrainInputs, TRAIN_DEFAULTS};
 use super::Execute;
 use crate::models::file::EpochRecord;
 use crate::train::pbns::{PhaseSplit, Trainer};
-use crate::train::{fit, CheckpointEvery, FitOptions, Fitted, Training};
+use crate::train::{fit_every, CheckpointEvery, FitOptions, Fitted, Training};
 use anyhow::Result;
 use serde::Serialize;
 use std::path::PathBuf;
@@ -92,9 +92,8 @@ impl Execute for Args {
             out: &self.out,
             quiet: self.output.json,
             log: self.log.as_deref(),
-            checkpoint_every: self.checkpoint_every,
         };
-        let fitted = fit(&mut trainer, &opts)?;
+        let fitted = fit_every(&mut trainer, &opts, self.checkpoint_every)?;
         let p = &trainer.poses;
         let recombined = p.train.iter().filter(|x| x.recombined).count();
         Ok(Report {

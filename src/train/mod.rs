@@ -78,8 +78,6 @@ pub struct FitOptions<'a> {
     pub quiet: bool,
     /// Append one JSON object per epoch to this file (JSON lines).
     pub log: Option<&'a Path>,
-    /// When a checkpoint is written (always after the last epoch too).
-    pub checkpoint_every: CheckpointEvery,
 }
 
 /// A checkpoint after this many epochs or this much wall time since the last one, whichever
@@ -91,7 +89,7 @@ pub struct CheckpointEvery {
 }
 
 impl CheckpointEvery {
-    /// After every epoch (what the dynamic trainer does: its checkpoints are small).
+    /// After every epoch.
     pub const EPOCH: CheckpointEvery = CheckpointEvery {
         epochs: Some(1),
         seconds: None,
@@ -205,10 +203,18 @@ pub fn checkpoint_path(out: &Path) -> PathBuf {
     out.with_file_name(format!("{stem}.ckpt.safetensors"))
 }
 
-/// Trains up to `opts.epochs`: a checkpoint on `opts.checkpoint_every` and after the last
-/// epoch, the final model at `opts.out`. A blow-up stops with an error that says which checkpoint
-/// survives.
+/// Trains up to `opts.epochs` with a checkpoint after every epoch (see [`fit_every`]).
 pub fn fit<T: Training>(trainer: &mut T, opts: &FitOptions) -> Result<Fitted> {
+    fit_every(trainer, opts, CheckpointEvery::EPOCH)
+}
+
+/// Trains up to `opts.epochs`: a checkpoint on `every` and after the last epoch, the final model
+/// at `opts.out`. A blow-up stops with an error that says which checkpoint survives.
+pub fn fit_every<T: Training>(
+    trainer: &mut T,
+    opts: &FitOptions,
+    every: CheckpointEvery,
+) -> Result<Fitted> {
     let started = Instant::now();
     if let Some(dir) = opts.out.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
@@ -245,7 +251,7 @@ pub fn fit<T: Training>(trainer: &mut T, opts: &FitOptions) -> Result<Fitted> {
         wall.steps += epoch_s - split.validation_seconds - split.refresh_seconds;
         stopped_early = trainer.stop_reason();
         let last = trainer.epochs_done() >= opts.epochs || stopped_early.is_some();
-        let due = opts.checkpoint_every.due(
+        let due = every.due(
             trainer.epochs_done() - since_checkpoint.0,
             since_checkpoint.1.elapsed().as_secs_f64(),
         );

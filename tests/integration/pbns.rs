@@ -14,7 +14,7 @@ use garmentbake::models::pose_features::tensor_points;
 use garmentbake::motion::load_clip;
 use garmentbake::train::losses::{collision, Cloth};
 use garmentbake::train::pbns::{Inputs, Settings, Trainer};
-use garmentbake::train::{fit, CheckpointEvery, FitOptions, Training};
+use garmentbake::train::{fit_every, CheckpointEvery, FitOptions, Training};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::{Mutex, OnceLock};
@@ -557,12 +557,12 @@ fn an_interrupted_run_resumed_from_its_checkpoint_ends_with_the_same_tensors() {
             out,
             quiet: true,
             log: None,
-            checkpoint_every: CheckpointEvery {
-                epochs: Some(3),
-                seconds: None,
-            },
         };
-        fit(trainer, &opts).unwrap()
+        let every = CheckpointEvery {
+            epochs: Some(3),
+            seconds: None,
+        };
+        fit_every(trainer, &opts, every).unwrap()
     };
     let mut whole = tiny_trainer_for(4, 5);
     let fitted = run(&mut whole, 5, &tmp("whole.safetensors"));
