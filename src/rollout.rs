@@ -31,6 +31,8 @@ pub struct Settings {
     pub learning_rate: f64,
     /// Texels per side of the residual map `Θ`.
     pub map: i64,
+    /// Per latent dimension, the range the roll-out is held in (the model's training range).
+    pub latent_range: Option<(Vec<f32>, Vec<f32>)>,
 }
 
 impl Default for Settings {
@@ -42,6 +44,7 @@ impl Default for Settings {
             iterations: 20,
             learning_rate: 0.002,
             map: 32,
+            latent_range: None,
         }
     }
 }
@@ -136,6 +139,10 @@ pub fn roll_out(
         Init::Garment(g) => g.clone(),
     };
     let laplacian = MeshLaplacian::new(triangles, first.len(), device);
+    let range = settings.latent_range.as_ref().map(|(lo, hi)| {
+        let t = |v: &[f32]| Tensor::from_slice(v).unsqueeze(0).to_device(device);
+        (t(lo), t(hi))
+    });
     let mut out = Rollout {
         frames: vec![first],
         timings: vec![FrameTiming::default()],
@@ -157,7 +164,10 @@ pub fn roll_out(
         let x = motion_inputs(space, &h, encoder.shape.sigma, None);
         timing.inputs_ms = ms(clock);
         let clock = Instant::now();
-        let z = tch::no_grad(|| encoder.latent(&x, Some(&encoder.dynamic_features(space, &x))));
+        let mut z = tch::no_grad(|| encoder.latent(&x, Some(&encoder.dynamic_features(space, &x))));
+        if let Some((lo, hi)) = &range {
+            z = z.clamp_tensor(Some(lo), Some(hi));
+        }
         timing.encoder_ms = ms(clock);
         let clock = Instant::now();
         let canonical = tch::no_grad(|| space.canonical(&z));

@@ -3,7 +3,7 @@
 
 use crate::models::file::ModelFile;
 use crate::train::pbns::{set_training_threads, InputFiles, Inputs, RefreshMode, Settings};
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
 
 /// The motion-capture clips a command reads, and how.
@@ -196,4 +196,25 @@ impl TrainInputs {
         };
         Ok((inputs, settings, warnings))
     }
+}
+
+/// A per-frame point cache of `mesh`'s vertices, in the format the extension names.
+pub fn write_cache(
+    path: &Path,
+    mesh: &crate::geometry::TriMesh,
+    frames: &[Vec<[f32; 3]>],
+    fps: f32,
+) -> Result<()> {
+    let cache = exporters::PointCache {
+        name: path
+            .file_stem()
+            .map_or("cache".into(), |s| s.to_string_lossy().into_owned()),
+        fps,
+        triangles: mesh.triangles.clone(),
+        uvs: None,
+        point_count: mesh.vertex_count(),
+        points: frames.iter().flatten().copied().collect(),
+    };
+    exporters::write_point_cache(&cache, path)
+        .with_context(|| format!("writing {}", path.display()))
 }

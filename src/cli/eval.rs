@@ -1,7 +1,7 @@
 //! `garmentbake eval`: a trained model over a clip → point cache + PBNS metrics.
 
+use super::args::write_cache;
 use super::args::{ClipArgs, ComputeArgs, OutputArgs};
-use super::simulate::write_cache;
 use super::Execute;
 use crate::eval::{compare, lbs_frames, model_frames};
 use crate::io::gltf_body::read_body;

@@ -7,6 +7,7 @@ pub mod eval;
 pub mod inspect;
 pub mod pose;
 pub mod preview;
+pub mod rollout;
 pub mod simulate;
 pub mod train;
 pub mod train_dynamic;
@@ -69,6 +70,7 @@ enum Command {
     Bake(bake::Args),
     Simulate(simulate::Args),
     TrainDynamic(train_dynamic::Args),
+    Rollout(rollout::Args),
     Bench(bench::Args),
 }
 
@@ -84,6 +86,7 @@ pub fn main() -> i32 {
         Command::Bake(a) => run(&a, a.output.json),
         Command::Simulate(a) => run(&a, a.output.json),
         Command::TrainDynamic(a) => run(&a, a.output.json),
+        Command::Rollout(a) => run(&a, a.output.json),
         Command::Bench(a) => run(&a, a.json()),
     };
     match result {

@@ -1,6 +1,6 @@
 //! `garmentbake simulate`: cloth-simulated ground truth of a garment on a clip (Blender).
 
-use super::args::{ClipArgs, OutputArgs};
+use super::args::{write_cache, ClipArgs, OutputArgs};
 use super::Execute;
 use crate::fabric::Fabric;
 use crate::garment::Garment;
@@ -8,7 +8,7 @@ use crate::io::gltf_body::read_body;
 use crate::simulate::{self, cache, stats, Scene, Settings};
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// Simulate a garment on a motion clip with Blender's cloth solver (headless, a subprocess) and
 /// write the garment's vertices per frame as a point cache: the ground truth dynamic models
@@ -218,25 +218,4 @@ impl Execute for Args {
             println!("wrote {}", b.display());
         }
     }
-}
-
-/// A per-frame point cache of `mesh`'s vertices, in the format the extension names.
-pub fn write_cache(
-    path: &Path,
-    mesh: &crate::geometry::TriMesh,
-    frames: &[Vec<[f32; 3]>],
-    fps: f32,
-) -> Result<()> {
-    let cache = exporters::PointCache {
-        name: path
-            .file_stem()
-            .map_or("cache".into(), |s| s.to_string_lossy().into_owned()),
-        fps,
-        triangles: mesh.triangles.clone(),
-        uvs: None,
-        point_count: mesh.vertex_count(),
-        points: frames.iter().flatten().copied().collect(),
-    };
-    exporters::write_point_cache(&cache, path)
-        .with_context(|| format!("writing {}", path.display()))
 }

@@ -75,6 +75,11 @@ pub struct Args {
     /// Initial Adam learning rate, cosine decay to a tenth (space 3e-4, dynamic 1e-3).
     #[arg(long)]
     pub lr: Option<f64>,
+    /// Stage dynamic: pull of the fitted latent integrator towards keeping the previous latent
+    /// (relative ridge penalty); stronger is steadier over long roll-outs, weaker follows the
+    /// simulation closer one step ahead.
+    #[arg(long, default_value_t = 0.1)]
+    pub ridge: f64,
     /// Stage dynamic: channels of the motion features `E_t`.
     #[arg(long, default_value_t = 16)]
     pub motion_features: usize,
@@ -328,6 +333,7 @@ impl Args {
             learning_rate: self.lr.unwrap_or(1e-3),
             seed: self.seed,
             device,
+            ridge: self.ridge,
         };
         let fps = info.fps as f64;
         let mut trainer = MotionTrainer::new(file, data, fps, settings)?;

@@ -91,6 +91,13 @@ pub struct MotionInfo {
     /// Clip file names and their frame counts.
     pub motions: Vec<String>,
     pub frames: usize,
+    /// Ridge pull of the fitted linear path towards keeping the previous latent.
+    pub ridge: f64,
+    /// Per latent dimension, the range of the training frames' latents widened by a tenth on
+    /// each side: roll-outs are held inside it (a garment the space never saw is not one it
+    /// can decode plausibly).
+    pub latent_min: Vec<f32>,
+    pub latent_max: Vec<f32>,
     pub history: Vec<MotionEpoch>,
 }
 
@@ -541,9 +548,11 @@ fn load_dynamic(
     garment: &TriMesh,
     body: &Body,
 ) -> Result<Dynamic> {
-    let space = load_space(t, info, garment, body)?;
+    let mut space = load_space(t, info, garment, body)?;
     let motion = match &info.motion {
         Some(m) => {
+            // A model with a motion stage has its space frozen for good.
+            space.freeze();
             let mut encoder = MotionEncoder::new(m.shape.clone(), &space, t.device);
             let stored: Vec<(String, Tensor)> =
                 t.st.names()

@@ -28,6 +28,8 @@ pub struct Settings {
     pub learning_rate: f64,
     pub seed: u64,
     pub device: Device,
+    /// See [`MotionEncoder::init_linear`].
+    pub ridge: f64,
 }
 
 /// Each frame's history: the indices of frames `t−1, t−2, t−3`, held at the clip's first frame
@@ -129,7 +131,7 @@ impl MotionTrainer {
                 "this is a PBNS model; --from needs a dynamic model (train-dynamic --stage space)"
             );
         };
-        dynamic.space.vs.freeze();
+        dynamic.space.freeze();
         let encoder = MotionEncoder::new(settings.shape.clone(), &dynamic.space, device);
         let fps = fps.max(1.0);
         let space = &dynamic.space;
@@ -146,7 +148,9 @@ impl MotionTrainer {
             &fitted.inertia,
             &fitted.previous_latent,
             &latents.index_select(0, &frames),
+            settings.ridge,
         );
+        let (lo, hi) = latent_range(&latents);
         let params = encoder.parameters();
         let adam = Adam::new(
             &params
@@ -161,6 +165,9 @@ impl MotionTrainer {
             learning_rate: settings.learning_rate,
             motions: Vec::new(),
             frames: data.len(),
+            ridge: settings.ridge,
+            latent_min: lo,
+            latent_max: hi,
             history: Vec::new(),
         };
         dynamic.motion = Some(encoder);
@@ -291,6 +298,14 @@ impl MotionTrainer {
         let t = (epoch as f64 / (self.settings.epochs.max(2) - 1) as f64).min(1.0);
         self.settings.learning_rate * (0.1 + 0.9 * 0.5 * (1.0 + (std::f64::consts::PI * t).cos()))
     }
+}
+
+/// Per dimension, the latents' range widened by a tenth on each side.
+fn latent_range(latents: &Tensor) -> (Vec<f32>, Vec<f32>) {
+    let (lo, hi) = (latents.amin(0, false), latents.amax(0, false));
+    let pad = (&hi - &lo) * 0.1;
+    let v = |t: Tensor| Vec::<f32>::try_from(t).unwrap_or_default();
+    (v(&lo - &pad), v(&hi + &pad))
 }
 
 /// Per-vertex L2 distance `[B, V]`.

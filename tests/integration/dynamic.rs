@@ -197,3 +197,153 @@ fn bad_inputs_name_the_file_and_write_nothing() {
         "{err}"
     );
 }
+
+/// The space (linear path only) and the motion stage on the six simulated frames.
+fn motion_model(dir: &Path, sim: &Path, name: &str, ridge: &str) -> (PathBuf, serde_json::Value) {
+    let space = dir.join("space.safetensors");
+    if !space.exists() {
+        train(sim, &space, "0", &[]);
+    }
+    let out = dir.join(name);
+    let report = garmentbake_json(&[
+        "train-dynamic",
+        "--stage",
+        "dynamic",
+        "--from",
+        space.to_str().unwrap(),
+        "--motion",
+        "samples/motions/131_01.bvh",
+        "--sim",
+        sim.to_str().unwrap(),
+        "--fps",
+        "30",
+        "--epochs",
+        "0",
+        "--ridge",
+        ridge,
+        "--threads",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    (out, report)
+}
+
+fn roll_out(model: &Path, sim: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
+    let mut args = vec![
+        "rollout",
+        "--model",
+        model.to_str().unwrap(),
+        "--motion",
+        "samples/motions/131_01.bvh",
+        "--init",
+        sim.to_str().unwrap(),
+        "--threads",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ];
+    args.extend_from_slice(extra);
+    garmentbake_json(&args)
+}
+
+#[test]
+fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
+    if blender_skipped() {
+        return;
+    }
+    let dir = out_dir("dyn_motion");
+    let sim = short_sim(&dir);
+    // A huge ridge pins the fitted integrator to "keep the previous latent": the baseline.
+    let (_, held) = motion_model(&dir, &sim, "held.safetensors", "1e9");
+    let (model, fitted) = motion_model(&dir, &sim, "fitted.safetensors", "1e-3");
+    let (h, f) = (
+        held["train"]["mean_mm"].as_f64().unwrap(),
+        fitted["train"]["mean_mm"].as_f64().unwrap(),
+    );
+    assert_eq!(fitted["train"]["frames"], 5, "six frames, five predicted");
+    assert!(
+        f < 0.5 * h,
+        "one-step error {h:.2} mm held, {f:.2} mm fitted"
+    );
+    let o = garmentbake_in_root(&["inspect", model.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("dynamic"), "{text}");
+    // The roll-out writes every frame, starting from the simulation's first.
+    let out = dir.join("roll.pc2");
+    let plain = roll_out(
+        &model,
+        &sim,
+        &out,
+        &["--no-collision-fix", "--reference", sim.to_str().unwrap()],
+    );
+    assert_eq!(plain["frames"], 6);
+    let frames = garmentbake::io::point_cache::read_pc2(&out, 2808).unwrap();
+    let first = garmentbake::io::point_cache::read_pc2(&sim, 2808).unwrap();
+    assert_eq!(frames.len(), 6);
+    assert!(frames[0] == first[0], "frame 0 is the --init garment");
+    let v = &plain["reference"];
+    assert!(v["one_step_mm"].as_f64().unwrap() < 2.0 * f + 1.0, "{v}");
+    // A wide clearance makes the fix fire on every frame; it must cut the collision loss.
+    let fixed = roll_out(
+        &model,
+        &sim,
+        &dir.join("fixed.pc2"),
+        &["--collision-margin-mm", "30"],
+    );
+    let (before, after) = (
+        fixed["collision_loss_before_mm"].as_f64().unwrap(),
+        fixed["collision_loss_after_mm"].as_f64().unwrap(),
+    );
+    assert_eq!(fixed["timing"]["fixed_frames"], 5, "{fixed}");
+    assert!(
+        after < 0.5 * before,
+        "collision loss {before:.1} → {after:.1} mm"
+    );
+}
+
+#[test]
+fn rollout_refuses_a_space_only_model_and_a_cache_of_another_mesh() {
+    if blender_skipped() {
+        return;
+    }
+    let dir = out_dir("dyn_rollout_bad");
+    let sim = short_sim(&dir);
+    let space = dir.join("space.safetensors");
+    train(&sim, &space, "0", &[]);
+    let out = dir.join("never.pc2");
+    let fails = |model: &Path, init: &str| {
+        let o = garmentbake_in_root(&[
+            "rollout",
+            "--model",
+            model.to_str().unwrap(),
+            "--motion",
+            "samples/motions/131_01.bvh",
+            "--init",
+            init,
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        one_error_line(&o, &out)
+    };
+    let err = fails(&space, "rest");
+    assert!(err.contains("only its generative space"), "{err}");
+    let (model, _) = motion_model(&dir, &sim, "m.safetensors", "0.1");
+    let body = dir.join("body.pc2");
+    let o = garmentbake_in_root(&[
+        "rollout",
+        "--model",
+        model.to_str().unwrap(),
+        "--motion",
+        "samples/motions/131_01.bvh",
+        "--out",
+        dir.join("ok.pc2").to_str().unwrap(),
+        "--body-out",
+        body.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let err = fails(&model, body.to_str().unwrap());
+    assert!(err.contains("body.pc2") && err.contains("2808"), "{err}");
+}

@@ -297,16 +297,25 @@ impl MotionEncoder {
     }
 
     /// Fits the linear path to frames' inputs and their simulated latents `target [F, L]` by
-    /// ridge regression (the penalty a thousandth of the inputs' mean square).
-    pub fn init_linear(&mut self, inertia: &Tensor, previous: &Tensor, target: &Tensor) {
+    /// ridge regression towards "keep the previous latent" (its starting value): the penalty is
+    /// `ridge` times the inputs' mean square. A stronger pull trades one-step accuracy for a
+    /// roll-out that does not amplify its own errors.
+    pub fn init_linear(
+        &mut self,
+        inertia: &Tensor,
+        previous: &Tensor,
+        target: &Tensor,
+        ridge: f64,
+    ) {
         tch::no_grad(|| {
             let x = Self::linear_input(inertia, previous).to_kind(Kind::Double);
             let n = x.size()[1];
             let gram = x.tr().matmul(&x);
-            let ridge = gram.diagonal(0, 0, 1).mean(Kind::Double) * 1e-3;
+            let penalty = gram.diagonal(0, 0, 1).mean(Kind::Double) * ridge;
             let eye = Tensor::eye(n, (Kind::Double, x.device()));
-            let rhs = x.tr().matmul(&target.to_kind(Kind::Double));
-            let w = Tensor::linalg_solve(&(gram + eye * ridge), &rhs, true);
+            let keep = self.linear.tr().to_kind(Kind::Double);
+            let rhs = x.tr().matmul(&target.to_kind(Kind::Double)) + &keep * &penalty;
+            let w = Tensor::linalg_solve(&(gram + eye * penalty), &rhs, true);
             self.linear.copy_(&w.tr().to_kind(Kind::Float));
         });
     }

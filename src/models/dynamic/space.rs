@@ -185,6 +185,8 @@ pub struct Space {
     linear_encode: Tensor,
     linear_decode: Tensor,
     pub consts: Consts,
+    /// The kernel weights once the space is frozen ([`Space::freeze`]).
+    frozen_weights: Option<Tensor>,
 }
 
 /// Initial kernel radius (metres): under the seed spacing (~6 cm for the cpu preset on the skirt), so
@@ -321,6 +323,7 @@ impl Space {
             linear_encode,
             linear_decode,
             consts,
+            frozen_weights: None,
         })
     }
 
@@ -484,11 +487,10 @@ impl Space {
     /// [`Space::rest_displacements`] needs.
     pub fn blended(&self, m: &Tensor) -> (Tensor, Tensor) {
         let k = &self.consts;
-        let d2 = (k.rest.unsqueeze(1) - k.seed_rest.unsqueeze(0))
-            .square()
-            .sum_dim_intlist(2, false, Kind::Float);
-        let rho2 = (self.log_radius.index_select(0, &k.seed_part) * 2.0).exp();
-        let w = (-d2 / (rho2 * 2.0)).softmax(1, Kind::Float);
+        let w = match &self.frozen_weights {
+            Some(w) => w.shallow_clone(),
+            None => self.kernel_weights(),
+        };
         let (bs, v) = (m.size()[0], k.rest.size()[0]);
         let a = w
             .unsqueeze(0)
@@ -496,6 +498,23 @@ impl Space {
             .bmm(m)
             .reshape([bs, v, 3, 4]);
         (a.narrow(3, 0, 3), a.select(3, 3))
+    }
+
+    /// `w_ij` `[V, N]` at the current radii.
+    fn kernel_weights(&self) -> Tensor {
+        let k = &self.consts;
+        let d2 = (k.rest.unsqueeze(1) - k.seed_rest.unsqueeze(0))
+            .square()
+            .sum_dim_intlist(2, false, Kind::Float);
+        let rho2 = (self.log_radius.index_select(0, &k.seed_part) * 2.0).exp();
+        (-d2 / (rho2 * 2.0)).softmax(1, Kind::Float)
+    }
+
+    /// Fixes every parameter (the dynamic stage and roll-outs use the space as trained) and
+    /// keeps the kernel weights, which then never change, instead of recomputing them per call.
+    pub fn freeze(&mut self) {
+        self.vs.freeze();
+        self.frozen_weights = Some(tch::no_grad(|| self.kernel_weights()));
     }
 
     /// Skins canonical garments `[B, V, 3]` by the seeds' transforms `m [B, N, 12]`.

@@ -1,0 +1,321 @@
+//! `garmentbake rollout`: a dynamic model played over clips frame by frame, written as a point cache.
+
+use super::args::{write_cache, ComputeArgs, OutputArgs};
+use super::Execute;
+use crate::io::point_cache::read_pc2;
+use crate::models::dynamic::Seeds;
+use crate::motion::{chain, load_clip, read_maps};
+use crate::rollout::{roll_out, FrameTiming, Init, Settings};
+use crate::simulate::stats::{self, Series, Summary};
+use anyhow::{bail, Result};
+use serde::Serialize;
+use std::path::PathBuf;
+
+/// Play a dynamic garment model (`train-dynamic --stage dynamic`) over motion clips.
+///
+/// Each frame's garment is predicted from the previous frames' garment and the body's motion,
+/// then becomes the next frame's history. Clips are resampled to the rate the model was trained
+/// at (recorded in the output). Several --motion clips play one after another as one roll-out:
+/// each later clip starts where the previous one ended, its first frames blended from the last
+/// pose (--fade). Per frame, a garment that crosses the body is pushed out by a residual
+/// displacement map optimised in the garment's UV space (the paper's test-time collision fix;
+/// --no-collision-fix to see the network alone).
+///
+/// Writes the garment per frame as a point cache (.pc2, Blender's Mesh Cache reads it; .usda/
+/// .usdc/.usd: time-sampled points). --reference SIM.pc2 (a `simulate` cache of the same clip)
+/// measures the roll-out against it: after one step, over the first 50 frames, over the clip.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Dynamic model with its motion stage (.safetensors).
+    #[arg(long)]
+    pub model: PathBuf,
+    /// BVH clip(s), played one after another.
+    #[arg(long = "motion", required = true)]
+    pub motions: Vec<PathBuf>,
+    /// Joint-name map(s) (TOML) for the clips.
+    #[arg(long = "map")]
+    pub maps: Vec<PathBuf>,
+    /// Where the roll-out starts: `rest` (the rest garment on the first pose, at rest) or a point
+    /// cache whose first frame is the starting garment (e.g. the clip's simulation).
+    #[arg(long, default_value = "rest")]
+    pub init: String,
+    /// Frames over which a later clip blends in from the previous clip's last pose.
+    #[arg(long, default_value_t = 15)]
+    pub fade: usize,
+    /// Output point cache (.pc2, .usda/.usdc/.usd).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Also write the posed body per frame as a point cache.
+    #[arg(long)]
+    pub body_out: Option<PathBuf>,
+    /// A simulated cache of the same (single) clip to measure the roll-out against.
+    #[arg(long)]
+    pub reference: Option<PathBuf>,
+    /// Skip the per-frame collision fix.
+    #[arg(long)]
+    pub no_collision_fix: bool,
+    /// Adam iterations of the collision fix on a frame that needs it.
+    #[arg(long, default_value_t = 20)]
+    pub collision_iterations: usize,
+    /// Clearance the collision fix keeps from the body (mm).
+    #[arg(long, default_value_t = 2.0)]
+    pub collision_margin_mm: f32,
+    #[command(flatten)]
+    pub compute: ComputeArgs,
+    #[command(flatten)]
+    pub output: OutputArgs,
+}
+
+/// Mean vertex L2 distance to a reference, over spans of the roll-out.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct Versus {
+    pub one_step_mm: f64,
+    pub first_50_mm: f64,
+    pub clip_mm: f64,
+    pub max_mm: f64,
+    pub worst_frame: usize,
+}
+
+/// Mean milliseconds per frame of each phase.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct Timing {
+    pub inputs_ms: f64,
+    pub encoder_ms: f64,
+    pub decode_ms: f64,
+    pub collision_ms: f64,
+    /// Without the collision phase.
+    pub network_ms: f64,
+    /// Frames on which the collision fix ran, and its mean time per iteration.
+    pub fixed_frames: usize,
+    pub ms_per_collision_iteration: f64,
+}
+
+#[derive(Serialize)]
+pub struct Report {
+    pub motions: Vec<PathBuf>,
+    pub fps: f32,
+    pub frames: usize,
+    pub collision_fix: bool,
+    /// The collision loss `Σ ReLU(margin − o)` (mm, summed over vertices), mean per frame, of the
+    /// network's garment and of the garment written (after the fix).
+    pub collision_loss_before_mm: f64,
+    pub collision_loss_after_mm: f64,
+    pub timing: Timing,
+    /// Our metrics on the written frames (inside the body by winding number, strain, speed).
+    pub summary: Summary,
+    pub reference: Option<Versus>,
+    pub out: PathBuf,
+    pub body_out: Option<PathBuf>,
+}
+
+impl Execute for Args {
+    type Report = Report;
+
+    fn execute(&self, say: &dyn Fn(&str)) -> Result<Report> {
+        let (file, _device) = self.compute.load_model(&self.model)?;
+        let dynamic = file.dynamic()?;
+        dynamic.motion()?;
+        let info = file.info.dynamic()?;
+        let fps = info.fps;
+        let skeleton = &file.body.skeleton;
+        let maps = read_maps(&self.maps)?;
+        let clips = self
+            .motions
+            .iter()
+            .map(|m| Ok(load_clip(m, &maps, skeleton, Some(fps))?.animation))
+            .collect::<Result<Vec<_>>>()?;
+        let poses = chain(&clips.iter().collect::<Vec<_>>(), self.fade);
+        let n = file.garment.vertex_count();
+        let init = match self.init.as_str() {
+            "rest" => Init::Rest,
+            path => {
+                let frames = read_pc2(std::path::Path::new(path), n)?;
+                match frames.into_iter().next() {
+                    Some(first) => Init::Garment(first),
+                    None => bail!("{path}: the --init cache has no frames"),
+                }
+            }
+        };
+        let reference = match &self.reference {
+            Some(path) => {
+                if self.motions.len() != 1 {
+                    bail!("--reference measures a single clip: give one --motion");
+                }
+                let frames = read_pc2(path, n)?;
+                if frames.len() != poses.len() {
+                    bail!(
+                        "{}: {} frames, the clip has {} at {fps} fps (simulated at another rate?)",
+                        path.display(),
+                        frames.len(),
+                        poses.len()
+                    );
+                }
+                Some(frames)
+            }
+            None => None,
+        };
+        let settings = Settings {
+            collision_fix: !self.no_collision_fix,
+            iterations: self.collision_iterations,
+            margin: self.collision_margin_mm * 1e-3,
+            latent_range: info
+                .motion
+                .as_ref()
+                .map(|m| (m.latent_min.clone(), m.latent_max.clone())),
+            ..Settings::default()
+        };
+        let seeds = Seeds::from_vertices(&file.body, &info.seeds, &info.seed_parts)?;
+        say(&format!(
+            "the model plays at {fps} fps (its training rate): clips are resampled to it"
+        ));
+        let bar = crate::progress::bar(poses.len() as u64, "roll-out", self.output.json);
+        let rollout = roll_out(
+            dynamic,
+            &file.body,
+            &seeds,
+            &file.garment.triangles,
+            &poses,
+            fps as f64,
+            &init,
+            &settings,
+            &mut |f| bar.set_position(f as u64 + 1),
+        )?;
+        bar.finish_and_clear();
+        let (_, summary) = stats::of(
+            &Series {
+                body: &file.body,
+                rest: &file.garment.positions,
+                triangles: &file.garment.triangles,
+                pinned: &[],
+                fps,
+            },
+            &rollout.frames,
+            &poses,
+            &[],
+            None,
+        );
+        write_cache(&self.out, &file.garment, &rollout.frames, fps)?;
+        if let Some(path) = &self.body_out {
+            let bodies: Vec<Vec<[f32; 3]>> = poses
+                .iter()
+                .map(|p| {
+                    let skinning = skeleton.skinning_matrices(p);
+                    file.body
+                        .skin
+                        .skin_points(&file.body.mesh.positions, &skinning)
+                })
+                .collect();
+            write_cache(path, &file.body.mesh, &bodies, fps)?;
+        }
+        Ok(Report {
+            motions: self.motions.clone(),
+            fps,
+            frames: rollout.frames.len(),
+            collision_fix: settings.collision_fix,
+            collision_loss_before_mm: mean_mm(&rollout.collision_before),
+            collision_loss_after_mm: mean_mm(&rollout.collision_after),
+            timing: timing(&rollout.timings),
+            summary,
+            reference: reference.map(|r| versus(&rollout.frames, &r)),
+            out: self.out.clone(),
+            body_out: self.body_out.clone(),
+        })
+    }
+
+    fn print(r: &Report) {
+        let t = &r.timing;
+        println!(
+            "rolled out {} frames at {} fps ({} clip(s)); collision fix {}",
+            r.frames,
+            r.fps,
+            r.motions.len(),
+            if r.collision_fix { "on" } else { "off" }
+        );
+        println!(
+            "ms per frame: input maps {:.1}, encoder {:.1}, decode + skinning {:.1} (network {:.1}); collision {:.1} (fix ran on {} frames, {:.1} ms per iteration)",
+            t.inputs_ms, t.encoder_ms, t.decode_ms, t.network_ms, t.collision_ms, t.fixed_frames, t.ms_per_collision_iteration
+        );
+        println!(
+            "collision loss Σ ReLU(margin − o) per frame: {:.2} mm from the network, {:.2} mm written",
+            r.collision_loss_before_mm, r.collision_loss_after_mm
+        );
+        let s = &r.summary;
+        println!(
+            "inside the body (winding number): {:.3} % of vertices on average, worst frame {} ({} vertices); edge strain mean {:.2} %, worst {:.2} %; fastest vertex {:.2} m/s",
+            s.inside.inside_pct, s.inside.worst_frame, s.inside.worst_frame_vertices, s.mean_strain_pct, s.max_strain_pct, s.max_speed
+        );
+        if let Some(v) = &r.reference {
+            println!(
+                "vs reference (vertex L2): after 1 step {:.2} mm, first 50 frames {:.2} mm, whole clip {:.2} mm, max {:.1} mm (frame {})",
+                v.one_step_mm, v.first_50_mm, v.clip_mm, v.max_mm, v.worst_frame
+            );
+        }
+        println!("wrote {}", r.out.display());
+        if let Some(b) = &r.body_out {
+            println!("wrote {}", b.display());
+        }
+    }
+}
+
+fn mean_mm(per_frame: &[f64]) -> f64 {
+    1e3 * per_frame.iter().sum::<f64>() / per_frame.len().max(1) as f64
+}
+
+fn timing(frames: &[FrameTiming]) -> Timing {
+    // Frame 0 is the start, not a prediction.
+    let predicted = &frames[1.min(frames.len())..];
+    let n = predicted.len().max(1) as f64;
+    let mean = |f: fn(&FrameTiming) -> f64| predicted.iter().map(f).sum::<f64>() / n;
+    let fixed: Vec<&FrameTiming> = predicted
+        .iter()
+        .filter(|t| t.collision_iterations > 0)
+        .collect();
+    let iterations: usize = fixed.iter().map(|t| t.collision_iterations).sum();
+    Timing {
+        inputs_ms: mean(|t| t.inputs_ms),
+        encoder_ms: mean(|t| t.encoder_ms),
+        decode_ms: mean(|t| t.decode_ms),
+        collision_ms: mean(|t| t.collision_ms),
+        network_ms: mean(|t| t.inputs_ms + t.encoder_ms + t.decode_ms),
+        fixed_frames: fixed.len(),
+        ms_per_collision_iteration: fixed.iter().map(|t| t.collision_ms).sum::<f64>()
+            / iterations.max(1) as f64,
+    }
+}
+
+/// Mean vertex distances of the roll-out to the reference: frame 1 (the first prediction),
+/// frames 1–50, every predicted frame.
+fn versus(frames: &[Vec<[f32; 3]>], reference: &[Vec<[f32; 3]>]) -> Versus {
+    let per_frame: Vec<(f64, f64)> = frames
+        .iter()
+        .zip(reference)
+        .map(|(a, b)| {
+            let d: Vec<f64> = a
+                .iter()
+                .zip(b)
+                .map(|(p, q)| {
+                    ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt()
+                        as f64
+                })
+                .collect();
+            (
+                d.iter().sum::<f64>() / d.len().max(1) as f64,
+                d.iter().copied().fold(0.0, f64::max),
+            )
+        })
+        .collect();
+    let mean = |s: &[(f64, f64)]| 1e3 * s.iter().map(|x| x.0).sum::<f64>() / s.len().max(1) as f64;
+    let predicted = &per_frame[1.min(per_frame.len())..];
+    let (worst_frame, max) =
+        per_frame
+            .iter()
+            .enumerate()
+            .fold((0, 0.0), |b, (f, x)| if x.1 > b.1 { (f, x.1) } else { b });
+    Versus {
+        one_step_mm: mean(&predicted[..1.min(predicted.len())]),
+        first_50_mm: mean(&predicted[..50.min(predicted.len())]),
+        clip_mm: mean(predicted),
+        max_mm: 1e3 * max,
+        worst_frame,
+    }
+}
