@@ -19,6 +19,7 @@ LAYERS = [
     "models",
     "train eval simulate rollout",
     "bake",
+    "validate",
     "cli",
 ]
 layer = {m: i for i, line in enumerate(LAYERS) for m in line.split()}

@@ -14,7 +14,8 @@
 //! 8. `train`, `eval`, `simulate`, `rollout` — training; evaluation over clips; cloth-simulated
 //!    ground truth; dynamic models rolled out frame by frame
 //! 9. `bake` — model output → the exporter-neutral baked asset (`exporters::asset`)
-//! 10. `cli` — one command per pipeline step
+//! 10. `validate` — files checked: structure, and replay against the model
+//! 11. `cli` — one command per pipeline step
 
 pub mod bake;
 pub mod body;
@@ -34,3 +35,4 @@ pub mod rig;
 pub mod rollout;
 pub mod simulate;
 pub mod train;
+pub mod validate;

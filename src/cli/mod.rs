@@ -11,6 +11,7 @@ pub mod rollout;
 pub mod simulate;
 pub mod train;
 pub mod train_dynamic;
+pub mod validate;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -72,6 +73,7 @@ enum Command {
     TrainDynamic(train_dynamic::Args),
     Rollout(rollout::Args),
     Bench(bench::Args),
+    Validate(validate::Args),
 }
 
 /// Runs the CLI; errors are one line on stderr and exit code 2 (1 is left for failed checks).
@@ -88,6 +90,7 @@ pub fn main() -> i32 {
         Command::TrainDynamic(a) => run(&a, a.output.json),
         Command::Rollout(a) => run(&a, a.output.json),
         Command::Bench(a) => run(&a, a.json()),
+        Command::Validate(a) => run(&a, a.output.json),
     };
     match result {
         Ok(code) => code,

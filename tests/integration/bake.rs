@@ -38,7 +38,7 @@ thread_local! {
     static INFLUENCES: std::cell::Cell<u8> = const { std::cell::Cell::new(4) };
 }
 
-fn model() -> &'static PathBuf {
+pub fn model() -> &'static PathBuf {
     static FOUR: OnceLock<PathBuf> = OnceLock::new();
     static EIGHT: OnceLock<PathBuf> = OnceLock::new();
     match INFLUENCES.with(|i| i.get()) {
@@ -47,12 +47,12 @@ fn model() -> &'static PathBuf {
     }
 }
 
-fn s(rel: &str) -> &'static str {
+pub fn s(rel: &str) -> &'static str {
     Box::leak(sample(rel).to_string_lossy().into_owned().into_boxed_str())
 }
 
 /// `garmentbake eval` of the test model on 131_02 at 30 fps into `out` (PC2 or USD cache).
-fn eval_131_02(out: &Path) {
+pub fn eval_131_02(out: &Path) {
     garmentbake_ok(&[
         "eval",
         "--model",
@@ -82,7 +82,7 @@ fn reference(dir: &Path) -> PathBuf {
     pc2
 }
 
-fn bake(dir: &Path, name: &str, extra: &[&str]) -> PathBuf {
+pub fn bake(dir: &Path, name: &str, extra: &[&str]) -> PathBuf {
     let out = dir.join(name);
     let mut args = vec![
         "bake",

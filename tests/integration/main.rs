@@ -12,3 +12,4 @@ mod pose;
 mod retarget;
 mod simulate;
 mod usd;
+mod validate;

@@ -1,0 +1,742 @@
+//! `garmentbake validate` against the Khronos glTF validator: a corpus of corruptions of a
+//! correct bake, generated here, each judged by both; every file Khronos reports an error for
+//! must fail ours. The confusion table (docs/validate.md) is printed by
+//! `cargo test --test integration validate::khronos_corpus -- --nocapture`.
+
+use crate::bake::bake;
+use crate::common::*;
+use garmentbake::validate::{check_gltf, Problems};
+use serde_json::{json, Value};
+use std::path::Path;
+
+/// A GLB taken apart: its JSON and its BIN chunk, to corrupt either and put back together.
+#[derive(Clone)]
+struct Glb {
+    json: Value,
+    bin: Vec<u8>,
+}
+
+impl Glb {
+    fn read(bytes: &[u8]) -> Glb {
+        let len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+        let json = serde_json::from_slice(&bytes[20..20 + len]).unwrap();
+        let bin_len = u32::from_le_bytes(bytes[20 + len..24 + len].try_into().unwrap()) as usize;
+        let bin = bytes[28 + len..28 + len + bin_len].to_vec();
+        Glb { json, bin }
+    }
+
+    fn bytes(&self) -> Vec<u8> {
+        let mut text = serde_json::to_vec(&self.json).unwrap();
+        while !text.len().is_multiple_of(4) {
+            text.push(b' ');
+        }
+        let mut bin = self.bin.clone();
+        while !bin.len().is_multiple_of(4) {
+            bin.push(0);
+        }
+        glb(&text, &bin)
+    }
+
+    /// Accessor index of the garment's attribute `name` (mesh 0, primitive 0).
+    fn attribute(&self, name: &str) -> usize {
+        self.json["meshes"][0]["primitives"][0]["attributes"][name]
+            .as_u64()
+            .unwrap() as usize
+    }
+
+    /// Sets `key` of the accessor of the garment's attribute `name`.
+    fn set_attribute_key(&mut self, name: &str, key: &str, value: Value) {
+        let a = self.attribute(name);
+        self.json["accessors"][a][key] = value;
+    }
+
+    /// Byte offset in BIN of component `c` of element `e` of a tightly packed accessor.
+    fn at(&self, accessor: usize, e: usize, c: usize) -> usize {
+        let a = &self.json["accessors"][accessor];
+        let view = &self.json["bufferViews"][a["bufferView"].as_u64().unwrap() as usize];
+        let size = match a["componentType"].as_u64().unwrap() {
+            5120 | 5121 => 1,
+            5122 | 5123 => 2,
+            _ => 4,
+        };
+        let comps = match a["type"].as_str().unwrap() {
+            "SCALAR" => 1,
+            "VEC2" => 2,
+            "VEC3" => 3,
+            "VEC4" => 4,
+            _ => 16,
+        };
+        let base = view["byteOffset"].as_u64().unwrap_or(0) + a["byteOffset"].as_u64().unwrap_or(0);
+        base as usize + (e * comps + c) * size
+    }
+
+    fn f32(&self, accessor: usize, e: usize, c: usize) -> f32 {
+        let o = self.at(accessor, e, c);
+        f32::from_le_bytes(self.bin[o..o + 4].try_into().unwrap())
+    }
+
+    fn set_f32(&mut self, accessor: usize, e: usize, c: usize, v: f32) {
+        let o = self.at(accessor, e, c);
+        self.bin[o..o + 4].copy_from_slice(&v.to_le_bytes());
+    }
+
+    fn set_u16(&mut self, accessor: usize, e: usize, c: usize, v: u16) {
+        let o = self.at(accessor, e, c);
+        self.bin[o..o + 2].copy_from_slice(&v.to_le_bytes());
+    }
+
+    /// Appends `bytes` to BIN as a new buffer view; returns its index.
+    fn append_view(&mut self, bytes: &[u8]) -> usize {
+        while !self.bin.len().is_multiple_of(4) {
+            self.bin.push(0);
+        }
+        let offset = self.bin.len();
+        self.bin.extend_from_slice(bytes);
+        while !self.bin.len().is_multiple_of(4) {
+            self.bin.push(0);
+        }
+        self.json["buffers"][0]["byteLength"] = json!(self.bin.len());
+        let views = self.json["bufferViews"].as_array_mut().unwrap();
+        views.push(json!({"buffer": 0, "byteOffset": offset, "byteLength": bytes.len()}));
+        views.len() - 1
+    }
+
+    /// The first animation sampler whose channel animates `path`.
+    fn sampler(&self, path: &str) -> usize {
+        let channels = self.json["animations"][0]["channels"].as_array().unwrap();
+        let c = channels
+            .iter()
+            .find(|c| c["target"]["path"] == path)
+            .unwrap();
+        c["sampler"].as_u64().unwrap() as usize
+    }
+
+    fn sampler_accessor(&self, path: &str, which: &str) -> usize {
+        let s = self.sampler(path);
+        self.json["animations"][0]["samplers"][s][which]
+            .as_u64()
+            .unwrap() as usize
+    }
+
+    /// The first vertex with at least two non-zero weights.
+    fn shared_vertex(&self) -> usize {
+        let w = self.attribute("WEIGHTS_0");
+        (0..).find(|&v| self.f32(w, v, 1) > 0.0).unwrap()
+    }
+}
+
+fn glb(text: &[u8], bin: &[u8]) -> Vec<u8> {
+    let mut out = Vec::new();
+    out.extend_from_slice(b"glTF");
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&((28 + text.len() + bin.len()) as u32).to_le_bytes());
+    out.extend_from_slice(&(text.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(text);
+    out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"BIN\0");
+    out.extend_from_slice(bin);
+    out
+}
+
+enum Edit {
+    /// A change to the document or the data, repacked as a well-formed GLB.
+    Doc(fn(&mut Glb)),
+    /// A change to the container's bytes.
+    Bytes(fn(Vec<u8>) -> Vec<u8>),
+}
+
+/// The corruptions, each named for the rule it breaks (plus two harmless edits and one
+/// SHOULD-level one, so the table has both kinds of row).
+fn corpus() -> Vec<(&'static str, Edit)> {
+    use Edit::*;
+    vec![
+        (
+            "harmless_rename",
+            Doc(|g| g.json["nodes"][0]["name"] = json!("renamed")),
+        ),
+        (
+            "harmless_extra_weights_key",
+            Doc(|g| g.json["asset"]["extras"] = json!({"note": 1})),
+        ),
+        (
+            "zero_weight_nonzero_joint",
+            Doc(|g| {
+                let (j, w) = (g.attribute("JOINTS_0"), g.attribute("WEIGHTS_0"));
+                let v = (0..).find(|&v| g.f32(w, v, 3) == 0.0).unwrap();
+                g.set_u16(j, v, 3, 5);
+            }),
+        ),
+        (
+            "bad_json",
+            Bytes(|b| {
+                let g = Glb::read(&b);
+                glb(b"{\"asset\": {\"version\": \"2.0\"},   ", &g.bin)
+            }),
+        ),
+        (
+            "json_schema_type",
+            Doc(|g| g.json["accessors"][0]["count"] = json!("many")),
+        ),
+        (
+            "missing_asset",
+            Doc(|g| {
+                g.json.as_object_mut().unwrap().remove("asset");
+            }),
+        ),
+        (
+            "asset_version_1",
+            Doc(|g| g.json["asset"]["version"] = json!("1.0")),
+        ),
+        (
+            "bad_magic",
+            Bytes(|mut b| {
+                b[3] = b'X';
+                b
+            }),
+        ),
+        (
+            "glb_version_1",
+            Bytes(|mut b| {
+                b[4] = 1;
+                b
+            }),
+        ),
+        (
+            "glb_length_mismatch",
+            Bytes(|mut b| {
+                b.extend_from_slice(&[0; 8]);
+                b
+            }),
+        ),
+        (
+            "truncated_file",
+            Bytes(|mut b| {
+                b.truncate(b.len() - 1000);
+                b
+            }),
+        ),
+        (
+            "truncated_bin_chunk",
+            Bytes(|b| {
+                let g = Glb::read(&b);
+                let text = serde_json::to_vec(&g.json).unwrap();
+                let mut text = text;
+                while !text.len().is_multiple_of(4) {
+                    text.push(b' ');
+                }
+                glb(&text, &g.bin[..g.bin.len() - 4096])
+            }),
+        ),
+        (
+            "unaligned_json_chunk",
+            Bytes(|b| {
+                let g = Glb::read(&b);
+                let mut text = serde_json::to_vec(&g.json).unwrap();
+                if text.len().is_multiple_of(4) {
+                    text.push(b' ');
+                }
+                glb(&text, &g.bin)
+            }),
+        ),
+        (
+            "bin_chunk_first",
+            Bytes(|b| {
+                let g = Glb::read(&b);
+                let mut out = b"glTF".to_vec();
+                out.extend_from_slice(&2u32.to_le_bytes());
+                out.extend_from_slice(&((12 + 8 + g.bin.len()) as u32).to_le_bytes());
+                out.extend_from_slice(&(g.bin.len() as u32).to_le_bytes());
+                out.extend_from_slice(b"BIN\0");
+                out.extend_from_slice(&g.bin);
+                out
+            }),
+        ),
+        (
+            "buffer_view_past_buffer",
+            Doc(|g| {
+                let len = g.json["buffers"][0]["byteLength"].as_u64().unwrap();
+                g.json["bufferViews"][1]["byteOffset"] = json!(len - 8);
+            }),
+        ),
+        (
+            "buffer_view_length_huge",
+            Doc(|g| g.json["bufferViews"][2]["byteLength"] = json!(1u64 << 40)),
+        ),
+        (
+            "byte_stride_3",
+            Doc(|g| {
+                let view = g.json["accessors"][g.attribute("NORMAL")]["bufferView"].clone();
+                g.json["bufferViews"][view.as_u64().unwrap() as usize]["byteStride"] = json!(3);
+            }),
+        ),
+        (
+            "accessor_count_past_view",
+            Doc(|g| {
+                let a = g.attribute("POSITION");
+                let n = g.json["accessors"][a]["count"].as_u64().unwrap();
+                g.json["accessors"][a]["count"] = json!(n + 1000);
+            }),
+        ),
+        (
+            "attribute_counts_differ",
+            Doc(|g| {
+                let a = g.attribute("NORMAL");
+                let n = g.json["accessors"][a]["count"].as_u64().unwrap();
+                g.json["accessors"][a]["count"] = json!(n - 1);
+            }),
+        ),
+        (
+            "accessor_offset_misaligned",
+            Doc(|g| g.set_attribute_key("TEXCOORD_0", "byteOffset", json!(2))),
+        ),
+        (
+            "position_type_vec2",
+            Doc(|g| g.set_attribute_key("POSITION", "type", json!("VEC2"))),
+        ),
+        (
+            "position_component_ushort",
+            Doc(|g| g.set_attribute_key("POSITION", "componentType", json!(5123))),
+        ),
+        (
+            "texcoord_type_scalar",
+            Doc(|g| g.set_attribute_key("TEXCOORD_0", "type", json!("SCALAR"))),
+        ),
+        (
+            "joints_as_float",
+            Doc(|g| {
+                let a = g.attribute("JOINTS_0");
+                g.json["accessors"][a]["componentType"] = json!(5126);
+                let n = g.json["accessors"][a]["count"].as_u64().unwrap();
+                g.json["accessors"][a]["count"] = json!(n / 2);
+            }),
+        ),
+        (
+            "position_nan",
+            Doc(|g| {
+                let a = g.attribute("POSITION");
+                g.set_f32(a, 7, 1, f32::NAN);
+            }),
+        ),
+        (
+            "position_max_wrong",
+            Doc(|g| {
+                let a = g.attribute("POSITION");
+                g.json["accessors"][a]["max"][1] = json!(9.0);
+            }),
+        ),
+        (
+            "position_without_bounds",
+            Doc(|g| {
+                let a = g.attribute("POSITION");
+                let acc = g.json["accessors"][a].as_object_mut().unwrap();
+                acc.remove("min");
+                acc.remove("max");
+            }),
+        ),
+        (
+            "normal_not_unit",
+            Doc(|g| {
+                let a = g.attribute("NORMAL");
+                for c in 0..3 {
+                    let v = g.f32(a, 3, c);
+                    g.set_f32(a, 3, c, 2.0 * v);
+                }
+            }),
+        ),
+        (
+            "index_past_vertices",
+            Doc(|g| {
+                let prim = &g.json["meshes"][0]["primitives"][0];
+                let a = prim["indices"].as_u64().unwrap() as usize;
+                let n = g.json["accessors"][g.attribute("POSITION")]["count"]
+                    .as_u64()
+                    .unwrap();
+                g.set_u16(a, 4, 0, n as u16);
+            }),
+        ),
+        (
+            "joint_index_past_skin",
+            Doc(|g| {
+                let a = g.attribute("JOINTS_0");
+                g.set_u16(a, 0, 0, 200);
+            }),
+        ),
+        (
+            "joint_index_duplicate",
+            Doc(|g| {
+                let (j, v) = (g.attribute("JOINTS_0"), g.shared_vertex());
+                let first =
+                    u16::from_le_bytes(g.bin[g.at(j, v, 0)..g.at(j, v, 0) + 2].try_into().unwrap());
+                g.set_u16(j, v, 1, first);
+            }),
+        ),
+        (
+            "weights_unnormalised",
+            Doc(|g| {
+                let w = g.attribute("WEIGHTS_0");
+                for c in 0..4 {
+                    let x = g.f32(w, 10, c);
+                    g.set_f32(w, 10, c, 1.5 * x);
+                }
+            }),
+        ),
+        (
+            "weight_negative",
+            Doc(|g| {
+                let (w, v) = (g.attribute("WEIGHTS_0"), g.shared_vertex());
+                let (a, b) = (g.f32(w, v, 0), g.f32(w, v, 1));
+                g.set_f32(w, v, 0, a + 2.0 * b);
+                g.set_f32(w, v, 1, -b);
+            }),
+        ),
+        (
+            "skin_removed_joints_attribute",
+            Doc(|g| {
+                let attrs = g.json["meshes"][0]["primitives"][0]["attributes"]
+                    .as_object_mut()
+                    .unwrap();
+                attrs.remove("JOINTS_0");
+                attrs.remove("WEIGHTS_0");
+            }),
+        ),
+        (
+            "morph_target_tangent_without_base",
+            Doc(|g| {
+                let n = g.attribute("NORMAL");
+                g.json["meshes"][0]["primitives"][0]["targets"][0]["TANGENT"] = json!(n);
+            }),
+        ),
+        (
+            "morph_target_wrong_count",
+            Doc(|g| {
+                let a = g.json["meshes"][0]["primitives"][0]["targets"][1]["POSITION"]
+                    .as_u64()
+                    .unwrap() as usize;
+                let n = g.json["accessors"][a]["count"].as_u64().unwrap();
+                g.json["accessors"][a]["count"] = json!(n / 2);
+                let acc = g.json["accessors"][a].as_object_mut().unwrap();
+                acc.remove("min");
+                acc.remove("max");
+                acc.insert("min".into(), json!([-1.0, -1.0, -1.0]));
+                acc.insert("max".into(), json!([1.0, 1.0, 1.0]));
+            }),
+        ),
+        (
+            "primitives_unequal_targets",
+            Doc(|g| {
+                let mut second = g.json["meshes"][0]["primitives"][0].clone();
+                second["targets"].as_array_mut().unwrap().truncate(3);
+                g.json["meshes"][0]["primitives"]
+                    .as_array_mut()
+                    .unwrap()
+                    .push(second);
+            }),
+        ),
+        (
+            "mesh_weights_length",
+            Doc(|g| {
+                g.json["meshes"][0]["weights"]
+                    .as_array_mut()
+                    .unwrap()
+                    .push(json!(0.0))
+            }),
+        ),
+        (
+            "sparse_index_past_count",
+            Doc(|g| {
+                let a = g.attribute("POSITION");
+                let n = g.json["accessors"][a]["count"].as_u64().unwrap() as u16;
+                let iv = g.append_view(&(n + 5).to_le_bytes());
+                let vv = g.append_view(&[0u8; 12]);
+                g.json["accessors"][a]["sparse"] = json!({"count": 1, "indices": {"bufferView": iv, "componentType": 5123}, "values": {"bufferView": vv}});
+            }),
+        ),
+        (
+            "sparse_indices_decreasing",
+            Doc(|g| {
+                let a = g.attribute("POSITION");
+                let idx: Vec<u8> = [9u16, 4].iter().flat_map(|i| i.to_le_bytes()).collect();
+                let iv = g.append_view(&idx);
+                let values: Vec<u8> = (0..6)
+                    .flat_map(|k| {
+                        let (e, c) = (if k < 3 { 9 } else { 4 }, k % 3);
+                        g.f32(a, e, c).to_le_bytes()
+                    })
+                    .collect();
+                let vv = g.append_view(&values);
+                g.json["accessors"][a]["sparse"] = json!({"count": 2, "indices": {"bufferView": iv, "componentType": 5123}, "values": {"bufferView": vv}});
+            }),
+        ),
+        (
+            "node_loop",
+            Doc(|g| g.json["nodes"][3]["children"] = json!([0])),
+        ),
+        (
+            "node_two_parents",
+            Doc(|g| {
+                let child = g.json["nodes"][2]["children"][0].clone();
+                let children = &mut g.json["nodes"][5]["children"];
+                match children.as_array_mut() {
+                    Some(c) => c.push(child),
+                    None => *children = json!([child]),
+                }
+            }),
+        ),
+        (
+            "scene_lists_child_node",
+            Doc(|g| {
+                g.json["scenes"][0]["nodes"]
+                    .as_array_mut()
+                    .unwrap()
+                    .push(json!(1))
+            }),
+        ),
+        (
+            "node_rotation_not_unit",
+            Doc(|g| g.json["nodes"][1]["rotation"] = json!([0.0, 0.0, 0.0, 2.0])),
+        ),
+        (
+            "node_matrix_and_trs",
+            Doc(|g| {
+                g.json["nodes"][1]["matrix"] = json!([
+                    1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0
+                ])
+            }),
+        ),
+        (
+            "skin_joint_missing_node",
+            Doc(|g| g.json["skins"][0]["joints"][3] = json!(9999)),
+        ),
+        (
+            "skin_joint_listed_twice",
+            Doc(|g| g.json["skins"][0]["joints"][3] = json!(2)),
+        ),
+        (
+            "skin_ibm_too_few",
+            Doc(|g| {
+                let a = g.json["skins"][0]["inverseBindMatrices"].as_u64().unwrap() as usize;
+                let n = g.json["accessors"][a]["count"].as_u64().unwrap();
+                g.json["accessors"][a]["count"] = json!(n - 2);
+            }),
+        ),
+        (
+            "skin_skeleton_not_root",
+            Doc(|g| g.json["skins"][0]["skeleton"] = json!(5)),
+        ),
+        (
+            "sampler_input_not_increasing",
+            Doc(|g| {
+                let a = g.sampler_accessor("rotation", "input");
+                let (t4, t5) = (g.f32(a, 4, 0), g.f32(a, 5, 0));
+                g.set_f32(a, 4, 0, t5);
+                g.set_f32(a, 5, 0, t4);
+            }),
+        ),
+        (
+            "sampler_input_negative",
+            Doc(|g| {
+                let a = g.sampler_accessor("rotation", "input");
+                g.set_f32(a, 0, 0, -0.5);
+                g.json["accessors"][a]["min"] = json!([-0.5]);
+            }),
+        ),
+        (
+            "sampler_input_without_bounds",
+            Doc(|g| {
+                let a = g.sampler_accessor("rotation", "input");
+                g.json["accessors"][a]
+                    .as_object_mut()
+                    .unwrap()
+                    .remove("max");
+            }),
+        ),
+        (
+            "sampler_output_count",
+            Doc(|g| {
+                let a = g.sampler_accessor("rotation", "output");
+                let n = g.json["accessors"][a]["count"].as_u64().unwrap();
+                g.json["accessors"][a]["count"] = json!(n - 1);
+            }),
+        ),
+        (
+            "sampler_cubic_without_tangents",
+            Doc(|g| {
+                let s = g.sampler("rotation");
+                g.json["animations"][0]["samplers"][s]["interpolation"] = json!("CUBICSPLINE");
+            }),
+        ),
+        (
+            "rotation_output_vec3",
+            Doc(|g| {
+                let a = g.sampler_accessor("rotation", "output");
+                g.json["accessors"][a]["type"] = json!("VEC3");
+            }),
+        ),
+        (
+            "rotation_key_not_unit",
+            Doc(|g| {
+                let a = g.sampler_accessor("rotation", "output");
+                g.set_f32(a, 2, 3, 3.0);
+            }),
+        ),
+        (
+            "weights_output_count",
+            Doc(|g| {
+                let a = g.sampler_accessor("weights", "output");
+                let n = g.json["accessors"][a]["count"].as_u64().unwrap();
+                g.json["accessors"][a]["count"] = json!(n - 32);
+            }),
+        ),
+        (
+            "channel_duplicate_target",
+            Doc(|g| {
+                let c = g.json["animations"][0]["channels"][1].clone();
+                g.json["animations"][0]["channels"]
+                    .as_array_mut()
+                    .unwrap()
+                    .push(c);
+            }),
+        ),
+        (
+            "channel_node_missing",
+            Doc(|g| g.json["animations"][0]["channels"][0]["target"]["node"] = json!(4000)),
+        ),
+        (
+            "channel_weights_on_joint",
+            Doc(|g| {
+                let channels = g.json["animations"][0]["channels"].as_array_mut().unwrap();
+                let c = channels
+                    .iter_mut()
+                    .find(|c| c["target"]["path"] == "weights")
+                    .unwrap();
+                c["target"]["node"] = json!(3);
+            }),
+        ),
+        (
+            "channel_sampler_missing",
+            Doc(|g| g.json["animations"][0]["channels"][0]["sampler"] = json!(777)),
+        ),
+    ]
+}
+
+/// One line per corpus file from tools/node/validate.mjs --each.
+fn khronos_each(files: &[std::path::PathBuf]) -> Vec<Value> {
+    let out = run_ok(
+        std::process::Command::new("node")
+            .arg(root().join("tools/node/validate.mjs"))
+            .arg("--each")
+            .args(files),
+    );
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
+}
+
+fn ours(path: &Path) -> Problems {
+    let mut problems = Problems::default();
+    check_gltf(path, &std::fs::read(path).unwrap(), &mut problems);
+    problems
+}
+
+#[test]
+fn khronos_corpus() {
+    let dir = out_dir("validate_corpus");
+    let base_path = bake(&dir, "base.glb", &[]);
+    let base = std::fs::read(&base_path).unwrap();
+    let corpus = corpus();
+    let mut files = vec![base_path.clone()];
+    for (i, (name, edit)) in corpus.iter().enumerate() {
+        let bytes = match edit {
+            Edit::Doc(f) => {
+                let mut g = Glb::read(&base);
+                f(&mut g);
+                g.bytes()
+            }
+            Edit::Bytes(f) => f(base.clone()),
+        };
+        let path = dir.join(format!("{i:02}_{name}.glb"));
+        std::fs::write(&path, bytes).unwrap();
+        files.push(path);
+    }
+    let khronos = khronos_each(&files);
+    let mut rows = String::from(
+        "| file | Khronos errors | Khronos codes | ours | our first error |\n|---|---|---|---|---|\n",
+    );
+    let mut cells = [[0usize; 2]; 2]; // [khronos error][ours fail]
+    let mut missed = Vec::new();
+    for (path, k) in files.iter().zip(&khronos) {
+        let p = ours(path);
+        let k_err = k["errors"].as_u64().unwrap() > 0;
+        let fail = !p.passed();
+        cells[k_err as usize][fail as usize] += 1;
+        if k_err && !fail {
+            missed.push(path.file_name().unwrap().to_string_lossy().into_owned());
+        }
+        let codes: Vec<&str> = k["codes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| c.as_str().unwrap())
+            .collect();
+        let first = p
+            .errors
+            .first()
+            .map(|e| format!("`{}` {}", e.at, e.message))
+            .unwrap_or_else(|| {
+                p.warnings
+                    .first()
+                    .map(|w| format!("(warning) {}", w.message))
+                    .unwrap_or_default()
+            });
+        rows.push_str(&format!(
+            "| {} | {} | {} | {} | {} |\n",
+            path.file_name().unwrap().to_string_lossy(),
+            k["errors"],
+            codes.join(" "),
+            if fail { "fail" } else { "pass" },
+            first.replace('|', "\\|")
+        ));
+    }
+    let table = format!(
+        "|  | ours: fail | ours: pass |\n|---|---|---|\n| Khronos: error | {} | {} |\n| Khronos: no error | {} | {} |\n\n{rows}",
+        cells[1][1], cells[1][0], cells[0][1], cells[0][0]
+    );
+    std::fs::write(dir.join("table.md"), &table).unwrap();
+    println!("{table}");
+    assert!(corpus.len() >= 30);
+    assert!(ours(&base_path).passed(), "the correct bake must pass");
+    assert_eq!(khronos[0]["errors"], 0, "the correct bake passes Khronos");
+    assert!(
+        missed.is_empty(),
+        "Khronos reports errors our validate passes: {missed:?}"
+    );
+    assert!(
+        cells[1][1] >= 30,
+        "at least 30 corruptions Khronos rejects: {cells:?}"
+    );
+    // The command: exit 0 on the correct bake, 1 (with the problem, as JSON) on a corrupt one,
+    // 2 on a file it cannot read at all.
+    assert!(garmentbake(&["validate", base_path.to_str().unwrap()])
+        .status
+        .success());
+    let nan = dir.join("24_position_nan.glb");
+    let out = garmentbake(&["validate", nan.to_str().unwrap(), "--json"]);
+    assert_eq!(out.status.code(), Some(1));
+    let report: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(report["passed"], false);
+    assert!(
+        report["errors"][0]["message"]
+            .as_str()
+            .unwrap()
+            .contains("NaN"),
+        "{report}"
+    );
+    let missing = dir.join("missing.glb");
+    let err = one_error_line(
+        &garmentbake(&["validate", missing.to_str().unwrap()]),
+        &missing,
+    );
+    assert!(err.contains("missing.glb"), "{err}");
+}
