@@ -1,7 +1,8 @@
 //! `garmentbake validate`: the pipeline gate — exit 0 only when a file is right.
 
-use super::args::OutputArgs;
+use super::args::{ClipArgs, ComputeArgs, OutputArgs};
 use super::Execute;
+use crate::validate::replay::{error_png, replay_gltf, Reference, ReplayError};
 use crate::validate::{check_gltf, Problem, Problems};
 use anyhow::{bail, Context, Result};
 use exporters::FileKind;
@@ -10,20 +11,46 @@ use std::path::PathBuf;
 
 /// Check one file the way a pipeline's CI would, with our own readers (no Node, no Blender).
 ///
-/// glTF / GLB: the container (GLB header and chunks), the JSON schema and its references,
-/// buffer views inside their buffers, accessor layouts, strides and declared min/max, the
-/// formats each attribute semantic allows, finite floats, unit normals, skin weights
-/// (non-negative, summing to 1) and joints (unique, inside the skin), morph targets consistent
-/// across primitives and with `weights`, animation samplers (strictly increasing times, output
-/// counts), channel targets, an acyclic node tree, skins whose joints and inverse bind matrices
-/// agree. Tolerances are the Khronos validator's.
+/// Structure. glTF / GLB: the container (GLB header and chunks), the JSON schema and its
+/// references, buffer views inside their buffers, accessor layouts, strides and declared
+/// min/max, the formats each attribute semantic allows, finite floats, unit normals, skin
+/// weights (non-negative, summing to 1) and joints (unique, inside the skin), morph targets
+/// consistent across primitives and with `weights`, animation samplers (strictly increasing
+/// times, output counts), channel targets, an acyclic node tree, skins whose joints and inverse
+/// bind matrices agree. Tolerances are the Khronos validator's.
 ///
-/// Exit code: 0 the file passes, 1 it fails (every problem is listed, located by JSON pointer),
-/// 2 it could not be read at all (missing file, unknown extension).
+/// Replay, with --model and --motion: the file is evaluated as its spec says (glTF: morph
+/// targets, then skinning, at every frame of the clip's animation) and compared with the
+/// model's own evaluation of the clip; max / mean / p99 error in mm, the worst frame and
+/// vertex; the file fails above --tolerance-mm. --png draws the worst frame coloured by error.
+///
+/// Exit code: 0 the file passes, 1 it fails (every problem is listed, located by JSON
+/// pointer), 2 it could not be read at all (missing file, unknown extension, bad options).
 #[derive(clap::Args)]
 pub struct Args {
     /// The file to check: .glb / .gltf.
     pub file: PathBuf,
+    /// The model the file was made from (.safetensors): replay the file against it.
+    #[arg(long, requires = "motion")]
+    pub model: Option<PathBuf>,
+    /// The clip (BVH) the file plays, retargeted onto the model's skeleton as bake does.
+    #[arg(long, requires = "model")]
+    pub motion: Option<PathBuf>,
+    /// Joint-name map(s) (TOML) for the clip, as given to bake.
+    #[arg(long = "map")]
+    pub maps: Vec<PathBuf>,
+    /// The rate the file was baked at (--fps of bake).
+    #[arg(long)]
+    pub fps: Option<f32>,
+    /// Largest replay error allowed, in millimetres.
+    #[arg(long, default_value_t = 1.0)]
+    pub tolerance_mm: f64,
+    /// Write the worst frame, coloured by replay error (green: under a tenth of the tolerance,
+    /// red: at or past it), as a PNG.
+    #[arg(long, requires = "model")]
+    pub png: Option<PathBuf>,
+    #[command(flatten)]
+    pub compute: ComputeArgs,
     #[command(flatten)]
     pub output: OutputArgs,
 }
@@ -35,6 +62,26 @@ pub struct Report {
     pub passed: bool,
     pub errors: Vec<Problem>,
     pub warnings: Vec<Problem>,
+    /// The replay against the model, when asked and the structure allowed it.
+    pub replay: Option<ReplayError>,
+    pub png: Option<PathBuf>,
+}
+
+impl Args {
+    /// The model's evaluation of the clip, when --model and --motion are given.
+    fn reference(&self) -> Result<Option<Reference>> {
+        let (Some(model), Some(motion)) = (&self.model, &self.motion) else {
+            return Ok(None);
+        };
+        let (model, device) = self.compute.load_model(model)?;
+        let clips = ClipArgs {
+            motions: vec![motion.clone()],
+            maps: self.maps.clone(),
+            fps: self.fps,
+        };
+        let (_, clip) = clips.load_single(model.skeleton())?;
+        Ok(Some(Reference::of(&model, &clip.animation, device)?))
+    }
 }
 
 impl Execute for Args {
@@ -42,24 +89,55 @@ impl Execute for Args {
 
     fn execute(&self, _say: &dyn Fn(&str)) -> Result<Report> {
         let path = &self.file;
-        let kind = FileKind::of(path);
-        if kind != Some(FileKind::Gltf) {
+        if FileKind::of(path) != Some(FileKind::Gltf) {
             bail!(
                 "{}: cannot validate this kind of file; use {}",
                 path.display(),
                 FileKind::extension_list(&[FileKind::Gltf], true)
             );
         }
+        if !self.tolerance_mm.is_finite() || self.tolerance_mm <= 0.0 {
+            bail!("--tolerance-mm must be positive, got {}", self.tolerance_mm);
+        }
         let bytes =
             std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+        let reference = self.reference()?;
         let mut problems = Problems::default();
-        check_gltf(path, &bytes, &mut problems);
+        let checked = check_gltf(path, &bytes, &mut problems);
+        let mut replay = None;
+        let mut png = None;
+        if let (Some(reference), true) = (&reference, problems.passed()) {
+            let (Some(doc), Some(accessors)) = (&checked.document, &checked.accessors) else {
+                unreachable!("a file that passed has a document and its accessors")
+            };
+            match replay_gltf(doc, accessors, reference, self.tolerance_mm) {
+                Ok(r) => {
+                    if !r.passed {
+                        problems.error(
+                            "replay",
+                            format!(
+                                "max error {:.3} mm (frame {}, vertex {}) exceeds the tolerance of {} mm",
+                                r.max_mm, r.worst_frame, r.worst_vertex, r.tolerance_mm
+                            ),
+                        );
+                    }
+                    if let Some(path) = &self.png {
+                        error_png(reference, &r, path)?;
+                        png = Some(path.clone());
+                    }
+                    replay = Some(r);
+                }
+                Err(reason) => problems.error("replay", reason),
+            }
+        }
         Ok(Report {
             file: path.clone(),
             format: "glTF".into(),
             passed: problems.passed(),
             errors: problems.errors,
             warnings: problems.warnings,
+            replay,
+            png,
         })
     }
 
@@ -72,10 +150,19 @@ impl Execute for Args {
             r.errors.len(),
             r.warnings.len()
         );
+        if let Some(x) = &r.replay {
+            println!(
+                "replay vs model on {} ({} frames, {} vertices): max {:.4} mm (frame {}, vertex {}), mean {:.4} mm, p99 {:.4} mm; tolerance {} mm",
+                x.clip, x.frames, x.vertices, x.max_mm, x.worst_frame, x.worst_vertex, x.mean_mm, x.p99_mm, x.tolerance_mm
+            );
+        }
         for (severity, list) in [("error", &r.errors), ("warning", &r.warnings)] {
             for p in list {
                 println!("  {severity} {}: {}", p.at, p.message);
             }
+        }
+        if let Some(png) = &r.png {
+            println!("wrote {}", png.display());
         }
     }
 

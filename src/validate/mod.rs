@@ -4,6 +4,8 @@
 
 pub mod accessor;
 pub mod container;
+pub mod replay;
+pub mod scene;
 pub mod structure;
 
 use serde::Serialize;

@@ -740,3 +740,84 @@ fn khronos_corpus() {
     );
     assert!(err.contains("missing.glb"), "{err}");
 }
+
+/// The bake's morph offsets (every target's POSITION) multiplied by `scale`, bounds updated so
+/// the file stays structurally valid.
+fn scale_morphs(base: &[u8], scale: f32) -> Vec<u8> {
+    let mut g = Glb::read(base);
+    let targets = g.json["meshes"][0]["primitives"][0]["targets"].clone();
+    for t in targets.as_array().unwrap() {
+        let a = t["POSITION"].as_u64().unwrap() as usize;
+        let n = g.json["accessors"][a]["count"].as_u64().unwrap() as usize;
+        let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+        for e in 0..n {
+            for c in 0..3 {
+                let v = g.f32(a, e, c) * scale;
+                g.set_f32(a, e, c, v);
+                (lo[c], hi[c]) = (lo[c].min(v), hi[c].max(v));
+            }
+        }
+        g.json["accessors"][a]["min"] = json!(lo);
+        g.json["accessors"][a]["max"] = json!(hi);
+    }
+    g.bytes()
+}
+
+fn validate_against_model(file: &Path, extra: &[&str]) -> (Option<i32>, Value) {
+    let mut args = vec![
+        "validate",
+        file.to_str().unwrap(),
+        "--model",
+        crate::bake::model().to_str().unwrap(),
+        "--motion",
+        crate::bake::s("motions/131_02.bvh"),
+        "--fps",
+        "30",
+        "--threads",
+        "1",
+        "--json",
+    ];
+    args.extend_from_slice(extra);
+    let out = garmentbake(&args);
+    let report = serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
+        panic!("{e}: {}", String::from_utf8_lossy(&out.stderr));
+    });
+    (out.status.code(), report)
+}
+
+#[test]
+fn replay_against_the_model() {
+    let dir = out_dir("validate_replay");
+    let base_path = bake(&dir, "base.glb", &[]);
+    let base = std::fs::read(&base_path).unwrap();
+    let (code, good) = validate_against_model(&base_path, &[]);
+    assert_eq!(code, Some(0), "{good}");
+    let r = &good["replay"];
+    assert_eq!(r["frames"], 312);
+    assert!(r["max_mm"].as_f64().unwrap() < 0.05, "{r}");
+
+    // Offsets ×1.05: structurally valid (Khronos and ours agree), but the replay is off by 5%
+    // of the morph displacement and fails the default 1 mm tolerance, with the error in mm.
+    let scaled = dir.join("morphs_x1.05.glb");
+    std::fs::write(&scaled, scale_morphs(&base, 1.05)).unwrap();
+    let (ok, summary) = khronos_validate(&scaled);
+    assert!(ok, "{summary}");
+    let png = dir.join("worst.png");
+    let (code, bad) = validate_against_model(&scaled, &["--png", png.to_str().unwrap()]);
+    assert_eq!(code, Some(1), "{bad}");
+    let e5 = bad["replay"]["max_mm"].as_f64().unwrap();
+    assert!(e5 > 1.0, "{bad}");
+    let message = bad["errors"][0]["message"].as_str().unwrap();
+    assert!(message.contains(&format!("{e5:.3} mm")), "{message}");
+    assert!(image::open(&png).is_ok(), "the worst frame picture");
+
+    // The error is linear in the scale: ×2 (the whole displacement again) is 20 times ×1.05's.
+    let doubled = dir.join("morphs_x2.glb");
+    std::fs::write(&doubled, scale_morphs(&base, 2.0)).unwrap();
+    let (_, twice) = validate_against_model(&doubled, &[]);
+    let e100 = twice["replay"]["max_mm"].as_f64().unwrap();
+    assert!(
+        (e100 / e5 - 20.0).abs() < 0.2,
+        "x2: {e100} mm, x1.05: {e5} mm"
+    );
+}

@@ -1,0 +1,237 @@
+//! Does the file play what the model plays? The file's frames (a glTF evaluated by
+//! [`super::scene`], or a point cache read back) against the model's own evaluation of the same
+//! clip (`eval::model_frames`, the reference `eval` and `bake` use), in mm, every frame.
+
+use crate::bake::skinned_mesh_asset;
+use crate::eval::model_frames;
+use crate::models::file::ModelFile;
+use crate::preview::{render_panel, save_png, DrawMesh, Framing, Panel, View};
+use crate::rig::SkelAnimation;
+use anyhow::{Context, Result};
+use serde::Serialize;
+use std::path::Path;
+use tch::Device;
+
+/// The model's garment over a clip, and how file vertices map onto it.
+pub struct Reference {
+    pub clip: String,
+    pub fps: f32,
+    /// `[frame][model vertex]`, world space, metres.
+    pub frames: Vec<Vec<[f32; 3]>>,
+    pub triangles: Vec<[u32; 3]>,
+    /// For each vertex of a baked glTF garment, the model vertex it came from (the bake splits
+    /// vertices at UV seams; point caches keep the model's order).
+    pub baked_vertex: Vec<u32>,
+}
+
+impl Reference {
+    /// The PBNS network evaluated on every frame of `clip` (already on the model's skeleton).
+    pub fn of(model: &ModelFile, clip: &SkelAnimation, device: Device) -> Result<Reference> {
+        let network = model.pbns()?;
+        let poses: Vec<_> = (0..clip.frame_count())
+            .map(|f| clip.local_pose(f))
+            .collect();
+        let frames = model_frames(network, model.skeleton(), &poses, device);
+        let baked = skinned_mesh_asset("garment", &model.garment, None, &network.skin(), [0.0; 3]);
+        Ok(Reference {
+            clip: clip.name.clone(),
+            fps: clip.fps,
+            frames,
+            triangles: model.garment.triangles.clone(),
+            baked_vertex: baked.source_vertex,
+        })
+    }
+
+    pub fn vertex_count(&self) -> usize {
+        self.frames.first().map_or(0, Vec::len)
+    }
+}
+
+/// Replay error of a file against the model, in millimetres.
+#[derive(Clone, Debug, Serialize)]
+pub struct ReplayError {
+    pub clip: String,
+    pub frames: usize,
+    pub vertices: usize,
+    pub max_mm: f64,
+    pub mean_mm: f64,
+    pub p99_mm: f64,
+    pub worst_frame: usize,
+    /// The file's vertex (for a glTF, its own index after seam splits).
+    pub worst_vertex: usize,
+    pub tolerance_mm: f64,
+    pub passed: bool,
+    /// Error per model vertex at the worst frame (mm), for the picture.
+    #[serde(skip)]
+    pub worst_frame_errors: Vec<f64>,
+}
+
+/// Compares `file_frame(f)` (the file's vertices at frame f) with the reference; `map[v]` is
+/// the model vertex of file vertex v.
+pub fn compare(
+    reference: &Reference,
+    map: &[u32],
+    tolerance_mm: f64,
+    file_frame: impl Fn(usize) -> Vec<[f64; 3]> + Sync,
+) -> ReplayError {
+    use rayon::prelude::*;
+    let per_frame: Vec<Vec<f64>> = (0..reference.frames.len())
+        .into_par_iter()
+        .map(|f| {
+            let want = &reference.frames[f];
+            file_frame(f)
+                .iter()
+                .zip(map)
+                .map(|(p, &m)| {
+                    let q = want[m as usize];
+                    1e3 * (0..3)
+                        .map(|c| (p[c] - q[c] as f64).powi(2))
+                        .sum::<f64>()
+                        .sqrt()
+                })
+                .collect()
+        })
+        .collect();
+    let mut all: Vec<f64> = per_frame.iter().flatten().copied().collect();
+    let (mut worst_frame, mut worst_vertex, mut max) = (0, 0, 0.0);
+    for (f, errors) in per_frame.iter().enumerate() {
+        for (v, &e) in errors.iter().enumerate() {
+            // NaN counts as the worst possible error.
+            if e > max || e.is_nan() && !f64::is_nan(max) {
+                (worst_frame, worst_vertex, max) = (f, v, e);
+            }
+        }
+    }
+    let mean = all.iter().sum::<f64>() / all.len().max(1) as f64;
+    all.sort_by(f64::total_cmp);
+    let p99 = all
+        .get(((all.len() as f64 * 0.99) as usize).min(all.len().saturating_sub(1)))
+        .copied()
+        .unwrap_or(0.0);
+    let mut worst_frame_errors = vec![0.0f64; reference.vertex_count()];
+    for (v, &e) in per_frame.get(worst_frame).into_iter().flatten().enumerate() {
+        let m = map[v] as usize;
+        worst_frame_errors[m] = worst_frame_errors[m].max(e);
+    }
+    ReplayError {
+        clip: reference.clip.clone(),
+        frames: per_frame.len(),
+        vertices: map.len(),
+        max_mm: max,
+        mean_mm: mean,
+        p99_mm: p99,
+        worst_frame,
+        worst_vertex,
+        tolerance_mm,
+        passed: max <= tolerance_mm,
+        worst_frame_errors,
+    }
+}
+
+/// Colours from "within a tenth of the tolerance" (green) to "at or past it" (red).
+const ERROR_COLORS: [[u8; 3]; 5] = [
+    [60, 170, 90],
+    [150, 200, 60],
+    [240, 200, 50],
+    [240, 130, 40],
+    [210, 40, 40],
+];
+
+/// The model's garment at the worst frame, each triangle coloured by its largest vertex error
+/// relative to the tolerance (front view), written atomically as PNG.
+pub fn error_png(reference: &Reference, error: &ReplayError, path: &Path) -> Result<()> {
+    let points = &reference.frames[error.worst_frame];
+    let band = |e: f64| {
+        let x = e / error.tolerance_mm;
+        [0.1, 0.3, 0.6, 1.0]
+            .iter()
+            .filter(|&&edge| x >= edge)
+            .count()
+    };
+    let mut bins: Vec<Vec<[u32; 3]>> = vec![Vec::new(); ERROR_COLORS.len()];
+    for t in &reference.triangles {
+        let e = t
+            .iter()
+            .map(|&v| error.worst_frame_errors[v as usize])
+            .fold(0.0, f64::max);
+        bins[band(e)].push(*t);
+    }
+    let meshes: Vec<DrawMesh> = bins
+        .iter()
+        .zip(ERROR_COLORS)
+        .map(|(triangles, color)| DrawMesh {
+            positions: points,
+            triangles,
+            color,
+        })
+        .collect();
+    let panel = Panel {
+        meshes,
+        view: View::Front,
+        label: format!(
+            "{} frame {}: max {:.3} mm (tolerance {} mm)",
+            error.clip, error.worst_frame, error.max_mm, error.tolerance_mm
+        ),
+    };
+    let framing = Framing::fit_meshes(&panel.meshes, View::Front);
+    let img = render_panel(&panel, 640, 800, &framing);
+    save_png(&img, path).with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// Replays a glTF whose structure passed against `reference`: the garment node (the mesh whose
+/// vertex count is the bake's, named `garment` when several match) through the animation named
+/// after the clip (or the only one), at frame f's time f / fps. Errors say why it cannot.
+pub fn replay_gltf(
+    doc: &super::container::Document,
+    accessors: &super::structure::Accessors,
+    reference: &Reference,
+    tolerance_mm: f64,
+) -> Result<ReplayError, String> {
+    let scene = super::scene::Scene::new(doc, accessors);
+    let root = &doc.root;
+    let want = reference.baked_vertex.len();
+    let candidates: Vec<usize> = (0..root.nodes.len())
+        .filter(|&n| root.nodes[n].mesh.is_some() && scene.positions(n, None, 0.0).len() == want)
+        .collect();
+    let node = match candidates.as_slice() {
+        [] => {
+            return Err(format!(
+                "no mesh has the model's {want} baked garment vertices (a bake of another model?)"
+            ))
+        }
+        [one] => *one,
+        many => *many
+            .iter()
+            .find(|&&n| root.nodes[n].name.as_deref() == Some("garment"))
+            .unwrap_or(&many[0]),
+    };
+    let animation = match root
+        .animations
+        .iter()
+        .position(|a| a.name.as_deref() == Some(reference.clip.as_str()))
+    {
+        Some(a) => a,
+        None if root.animations.len() == 1 => 0,
+        None => {
+            return Err(format!(
+                "no animation is named '{}' (the clip), and there are {}",
+                reference.clip,
+                root.animations.len()
+            ))
+        }
+    };
+    let keys = scene.times(animation).len();
+    if keys != reference.frames.len() {
+        return Err(format!(
+            "animation {animation} has {keys} keys, the clip {} frames (another --fps?)",
+            reference.frames.len()
+        ));
+    }
+    let fps = reference.fps as f64;
+    Ok(compare(
+        reference,
+        &reference.baked_vertex,
+        tolerance_mm,
+        |f| scene.positions(node, Some(animation), f as f64 / fps),
+    ))
+}
