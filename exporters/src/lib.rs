@@ -7,6 +7,7 @@
 pub mod asset;
 pub mod atomic;
 pub mod gltf;
+pub mod mdd;
 pub mod pc2;
 #[cfg(feature = "usd")]
 pub mod usd;
@@ -20,6 +21,8 @@ pub enum ExportError {
     Gltf(#[from] gltf::GltfError),
     #[error(transparent)]
     Pc2(#[from] pc2::Pc2Error),
+    #[error(transparent)]
+    Mdd(#[from] mdd::MddError),
     #[cfg(feature = "usd")]
     #[error(transparent)]
     Usd(#[from] usd::UsdError),
@@ -33,6 +36,7 @@ pub enum FileKind {
     Gltf,
     Usd,
     Pc2,
+    Mdd,
     Bvh,
     Obj,
     /// A garmentbake model (`.safetensors`).
@@ -41,7 +45,7 @@ pub enum FileKind {
 
 /// The one extension table: every extension, its kind, and whether garmentbake writes it
 /// (usd-core reads plain `.usd`, we write the explicit `.usda`/`.usdc`/`.usdz`).
-pub const EXTENSIONS: [(&str, FileKind, bool); 10] = [
+pub const EXTENSIONS: [(&str, FileKind, bool); 11] = [
     ("glb", FileKind::Gltf, true),
     ("gltf", FileKind::Gltf, true),
     ("usd", FileKind::Usd, false),
@@ -49,6 +53,7 @@ pub const EXTENSIONS: [(&str, FileKind, bool); 10] = [
     ("usdc", FileKind::Usd, true),
     ("usdz", FileKind::Usd, true),
     ("pc2", FileKind::Pc2, true),
+    ("mdd", FileKind::Mdd, true),
     ("bvh", FileKind::Bvh, false),
     ("obj", FileKind::Obj, true),
     ("safetensors", FileKind::Model, true),
@@ -94,16 +99,17 @@ pub fn write(asset: &BakedAsset, path: &Path) -> Result<(), ExportError> {
     }
 }
 
-/// Writes a per-frame point cache in the format its extension names: PC2, or USD (a Mesh with
-/// time-sampled points).
+/// Writes a per-frame point cache in the format its extension names: PC2, MDD, or USD (a Mesh
+/// with time-sampled points).
 pub fn write_point_cache(cache: &PointCache, path: &Path) -> Result<(), ExportError> {
     match FileKind::written(path) {
         Some(FileKind::Pc2) => Ok(pc2::write(path, cache)?),
+        Some(FileKind::Mdd) => Ok(mdd::write(path, cache)?),
         Some(FileKind::Usd) => write_usd_cache(cache, path),
         _ => Err(wrong_extension(
             path,
             "point-cache ",
-            &[FileKind::Pc2, FileKind::Usd],
+            &[FileKind::Pc2, FileKind::Mdd, FileKind::Usd],
         )),
     }
 }

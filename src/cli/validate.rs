@@ -2,7 +2,8 @@
 
 use super::args::{ClipArgs, ComputeArgs, OutputArgs};
 use super::Execute;
-use crate::validate::replay::{error_png, replay_gltf, Reference, ReplayError};
+use crate::validate::cache::{check_against_clip, check_mdd, check_pc2};
+use crate::validate::replay::{compare, error_png, replay_gltf, Reference, ReplayError};
 use crate::validate::{check_gltf, Problem, Problems};
 use anyhow::{bail, Context, Result};
 use exporters::FileKind;
@@ -19,16 +20,19 @@ use std::path::PathBuf;
 /// times, output counts), channel targets, an acyclic node tree, skins whose joints and inverse
 /// bind matrices agree. Tolerances are the Khronos validator's.
 ///
+/// PC2 / MDD: the header, the size it announces (a cut-off file says so), finite points; MDD
+/// frame times strictly increasing and evenly spaced (their spacing is the rate).
+///
 /// Replay, with --model and --motion: the file is evaluated as its spec says (glTF: morph
-/// targets, then skinning, at every frame of the clip's animation) and compared with the
-/// model's own evaluation of the clip; max / mean / p99 error in mm, the worst frame and
+/// targets, then skinning, at every frame of the clip's animation; caches: read back, frame
+/// count and rate checked against the clip) and compared with the model's own evaluation; max / mean / p99 error in mm, the worst frame and
 /// vertex; the file fails above --tolerance-mm. --png draws the worst frame coloured by error.
 ///
 /// Exit code: 0 the file passes, 1 it fails (every problem is listed, located by JSON
 /// pointer), 2 it could not be read at all (missing file, unknown extension, bad options).
 #[derive(clap::Args)]
 pub struct Args {
-    /// The file to check: .glb / .gltf.
+    /// The file to check: .glb / .gltf, or a point cache .pc2 / .mdd.
     pub file: PathBuf,
     /// The model the file was made from (.safetensors): replay the file against it.
     #[arg(long, requires = "motion")]
@@ -84,18 +88,70 @@ impl Args {
     }
 }
 
+impl Args {
+    /// Structure of a glTF, then its replay against the model.
+    fn gltf(
+        &self,
+        bytes: &[u8],
+        reference: Option<&Reference>,
+        p: &mut Problems,
+    ) -> Option<ReplayError> {
+        let checked = check_gltf(&self.file, bytes, p);
+        let (Some(reference), Some(doc), Some(accessors), true) =
+            (reference, &checked.document, &checked.accessors, p.passed())
+        else {
+            return None;
+        };
+        replay_gltf(doc, accessors, reference, self.tolerance_mm)
+            .map_err(|reason| p.error("replay", reason))
+            .ok()
+    }
+
+    /// Structure of a PC2 / MDD, then its frames against the model's (same vertex order, as
+    /// `eval` writes them).
+    fn cache(
+        &self,
+        kind: FileKind,
+        bytes: &[u8],
+        reference: Option<&Reference>,
+        p: &mut Problems,
+    ) -> Option<ReplayError> {
+        let cache = match kind {
+            FileKind::Mdd => check_mdd(bytes, p),
+            _ => check_pc2(bytes, p),
+        }?;
+        let reference = reference?;
+        let vertices = reference.vertex_count();
+        check_against_clip(
+            &cache,
+            reference.frames.len(),
+            reference.fps as f64,
+            vertices,
+            p,
+        );
+        if !p.passed() {
+            return None;
+        }
+        let identity: Vec<u32> = (0..vertices as u32).collect();
+        Some(compare(reference, &identity, self.tolerance_mm, |f| {
+            cache.frames[f].iter().map(|q| q.map(f64::from)).collect()
+        }))
+    }
+}
+
 impl Execute for Args {
     type Report = Report;
 
     fn execute(&self, _say: &dyn Fn(&str)) -> Result<Report> {
         let path = &self.file;
-        if FileKind::of(path) != Some(FileKind::Gltf) {
+        let kinds = [FileKind::Gltf, FileKind::Pc2, FileKind::Mdd];
+        let Some(kind) = FileKind::of(path).filter(|k| kinds.contains(k)) else {
             bail!(
                 "{}: cannot validate this kind of file; use {}",
                 path.display(),
-                FileKind::extension_list(&[FileKind::Gltf], true)
+                FileKind::extension_list(&kinds, true)
             );
-        }
+        };
         if !self.tolerance_mm.is_finite() || self.tolerance_mm <= 0.0 {
             bail!("--tolerance-mm must be positive, got {}", self.tolerance_mm);
         }
@@ -103,36 +159,29 @@ impl Execute for Args {
             std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
         let reference = self.reference()?;
         let mut problems = Problems::default();
-        let checked = check_gltf(path, &bytes, &mut problems);
-        let mut replay = None;
+        let replay = match kind {
+            FileKind::Gltf => self.gltf(&bytes, reference.as_ref(), &mut problems),
+            _ => self.cache(kind, &bytes, reference.as_ref(), &mut problems),
+        };
         let mut png = None;
-        if let (Some(reference), true) = (&reference, problems.passed()) {
-            let (Some(doc), Some(accessors)) = (&checked.document, &checked.accessors) else {
-                unreachable!("a file that passed has a document and its accessors")
-            };
-            match replay_gltf(doc, accessors, reference, self.tolerance_mm) {
-                Ok(r) => {
-                    if !r.passed {
-                        problems.error(
-                            "replay",
-                            format!(
-                                "max error {:.3} mm (frame {}, vertex {}) exceeds the tolerance of {} mm",
-                                r.max_mm, r.worst_frame, r.worst_vertex, r.tolerance_mm
-                            ),
-                        );
-                    }
-                    if let Some(path) = &self.png {
-                        error_png(reference, &r, path)?;
-                        png = Some(path.clone());
-                    }
-                    replay = Some(r);
-                }
-                Err(reason) => problems.error("replay", reason),
+        if let (Some(r), Some(reference)) = (&replay, &reference) {
+            if !r.passed {
+                problems.error(
+                    "replay",
+                    format!(
+                        "max error {:.3} mm (frame {}, vertex {}) exceeds the tolerance of {} mm",
+                        r.max_mm, r.worst_frame, r.worst_vertex, r.tolerance_mm
+                    ),
+                );
+            }
+            if let Some(path) = &self.png {
+                error_png(reference, r, path)?;
+                png = Some(path.clone());
             }
         }
         Ok(Report {
             file: path.clone(),
-            format: "glTF".into(),
+            format: format!("{kind:?}"),
             passed: problems.passed(),
             errors: problems.errors,
             warnings: problems.warnings,

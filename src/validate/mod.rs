@@ -3,6 +3,7 @@
 //! spec evaluates it against the model's own evaluation, in mm.
 
 pub mod accessor;
+pub mod cache;
 pub mod container;
 pub mod replay;
 pub mod scene;

@@ -763,7 +763,7 @@ fn scale_morphs(base: &[u8], scale: f32) -> Vec<u8> {
     g.bytes()
 }
 
-fn validate_against_model(file: &Path, extra: &[&str]) -> (Option<i32>, Value) {
+fn validate_against_model(file: &Path, fps: &str, extra: &[&str]) -> (Option<i32>, Value) {
     let mut args = vec![
         "validate",
         file.to_str().unwrap(),
@@ -772,7 +772,7 @@ fn validate_against_model(file: &Path, extra: &[&str]) -> (Option<i32>, Value) {
         "--motion",
         crate::bake::s("motions/131_02.bvh"),
         "--fps",
-        "30",
+        fps,
         "--threads",
         "1",
         "--json",
@@ -790,7 +790,7 @@ fn replay_against_the_model() {
     let dir = out_dir("validate_replay");
     let base_path = bake(&dir, "base.glb", &[]);
     let base = std::fs::read(&base_path).unwrap();
-    let (code, good) = validate_against_model(&base_path, &[]);
+    let (code, good) = validate_against_model(&base_path, "30", &[]);
     assert_eq!(code, Some(0), "{good}");
     let r = &good["replay"];
     assert_eq!(r["frames"], 312);
@@ -803,7 +803,7 @@ fn replay_against_the_model() {
     let (ok, summary) = khronos_validate(&scaled);
     assert!(ok, "{summary}");
     let png = dir.join("worst.png");
-    let (code, bad) = validate_against_model(&scaled, &["--png", png.to_str().unwrap()]);
+    let (code, bad) = validate_against_model(&scaled, "30", &["--png", png.to_str().unwrap()]);
     assert_eq!(code, Some(1), "{bad}");
     let e5 = bad["replay"]["max_mm"].as_f64().unwrap();
     assert!(e5 > 1.0, "{bad}");
@@ -814,10 +814,142 @@ fn replay_against_the_model() {
     // The error is linear in the scale: ×2 (the whole displacement again) is 20 times ×1.05's.
     let doubled = dir.join("morphs_x2.glb");
     std::fs::write(&doubled, scale_morphs(&base, 2.0)).unwrap();
-    let (_, twice) = validate_against_model(&doubled, &[]);
+    let (_, twice) = validate_against_model(&doubled, "30", &[]);
     let e100 = twice["replay"]["max_mm"].as_f64().unwrap();
     assert!(
         (e100 / e5 - 20.0).abs() < 0.2,
         "x2: {e100} mm, x1.05: {e5} mm"
     );
+}
+
+/// Runs `validate FILE --json [extra]`: (exit code, report).
+fn validate_json(file: &Path, extra: &[&str]) -> (Option<i32>, Value) {
+    let mut args = vec!["validate", file.to_str().unwrap(), "--json"];
+    args.extend_from_slice(extra);
+    let out = garmentbake(&args);
+    let report = serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&out.stderr)));
+    (out.status.code(), report)
+}
+
+/// The first error message of a failed report.
+fn first_error(code: Option<i32>, report: &Value) -> String {
+    assert_eq!(code, Some(1), "{report}");
+    report["errors"][0]["message"].as_str().unwrap().to_string()
+}
+
+/// 131_02 at 4 fps.
+const FRAMES: usize = 42;
+
+#[test]
+fn point_caches() {
+    let dir = out_dir("validate_caches");
+    let (pc2, mdd) = (dir.join("eval.pc2"), dir.join("eval.mdd"));
+    // 131_02 at 4 fps (42 frames): eval's metrics are the slow part, the checks need few frames.
+    for out in [&pc2, &mdd] {
+        garmentbake_ok(&[
+            "eval",
+            "--model",
+            crate::bake::model().to_str().unwrap(),
+            "--motion",
+            crate::bake::s("motions/131_02.bvh"),
+            "--fps",
+            "4",
+            "--threads",
+            "1",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+    }
+    // eval's caches pass, and replay the network exactly.
+    for file in [&pc2, &mdd] {
+        let (code, report) = validate_against_model(file, "4", &[]);
+        assert_eq!(code, Some(0), "{report}");
+        assert_eq!(report["replay"]["frames"], FRAMES);
+        assert!(
+            report["replay"]["max_mm"].as_f64().unwrap() < 1e-3,
+            "{report}"
+        );
+    }
+    let bytes = std::fs::read(&mdd).unwrap();
+    let frames = FRAMES;
+    let points = (bytes.len() - 8 - 4 * frames) / (12 * frames);
+    let broken = |name: &str, data: Vec<u8>| {
+        let path = dir.join(name);
+        std::fs::write(&path, data).unwrap();
+        path
+    };
+    // A cut-off PC2.
+    let mut cut = std::fs::read(&pc2).unwrap();
+    cut.truncate(cut.len() - 1000);
+    let (code, report) = validate_json(&broken("cut.pc2", cut), &[]);
+    let e = first_error(code, &report);
+    assert!(e.contains("truncated") && e.contains("42 samples"), "{e}");
+    // An MDD whose header announces one frame more than it holds.
+    let mut wrong = bytes.clone();
+    wrong[..4].copy_from_slice(&(frames as i32 + 1).to_be_bytes());
+    let (code, report) = validate_json(&broken("frames.mdd", wrong), &[]);
+    let e = first_error(code, &report);
+    assert!(e.contains("frame count is 43"), "{e}");
+    // A NaN point.
+    let mut nan = bytes.clone();
+    let at = 8 + 4 * frames + 12 * (points * 7 + 3);
+    nan[at..at + 4].copy_from_slice(&f32::NAN.to_be_bytes());
+    let (code, report) = validate_json(&broken("nan.mdd", nan), &[]);
+    assert!(
+        first_error(code, &report).contains("point 3 is not finite"),
+        "{report}"
+    );
+    // Consistent files that do not play the clip: one frame short, and times at 25 fps.
+    let mut short = bytes.clone();
+    short[..4].copy_from_slice(&(frames as i32 - 1).to_be_bytes());
+    short.drain(8 + 4 * (frames - 1)..8 + 4 * frames);
+    short.truncate(short.len() - 12 * points);
+    let (code, report) = validate_json(&broken("short.mdd", short.clone()), &[]);
+    assert_eq!(code, Some(0), "structurally sound: {report}");
+    let (code, report) = validate_against_model(&dir.join("short.mdd"), "4", &[]);
+    assert!(first_error(code, &report).contains("41 frames, the clip at 4 fps has 42"));
+    let mut slow = bytes.clone();
+    for f in 0..frames {
+        slow[8 + 4 * f..12 + 4 * f].copy_from_slice(&(f as f32 / 5.0).to_be_bytes());
+    }
+    let (code, report) = validate_against_model(&broken("rate.mdd", slow), "4", &[]);
+    assert!(
+        first_error(code, &report).contains("give 5.0000 fps"),
+        "{report}"
+    );
+
+    // Blender's Mesh Cache modifier plays our MDD as we wrote it.
+    if blender_skipped() {
+        return;
+    }
+    let json = dir.join("blender_mdd.json");
+    run_ok(
+        std::process::Command::new("blender")
+            .args(["-b", "--factory-startup", "--python"])
+            .arg(root().join("tools/blender/eval_pc2.py"))
+            .arg("--")
+            .arg(sample("garments/skirt.obj"))
+            .arg(&mdd)
+            .args(["--frames", "0,5,40", "--out"])
+            .arg(&json),
+    );
+    let r: Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(r["header"]["num_samples"], FRAMES);
+    for f in r["frames"].as_array().unwrap() {
+        let frame = f["frame"].as_f64().unwrap() as usize;
+        let start = 8 + 4 * frames + 12 * points * frame;
+        let want: Vec<f32> = bytes[start..start + 12 * points]
+            .chunks_exact(4)
+            .map(|b| f32::from_be_bytes(b.try_into().unwrap()))
+            .collect();
+        let got = f["positions"].as_array().unwrap();
+        assert_eq!(got.len(), want.len());
+        let worst = got
+            .iter()
+            .zip(&want)
+            .map(|(a, &b)| (a.as_f64().unwrap() - b as f64).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-5, "frame {frame}: Blender differs by {worst} m");
+    }
 }

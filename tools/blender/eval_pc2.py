@@ -1,11 +1,12 @@
-"""Play a PC2 point cache on an OBJ in Blender (an independent reader).
+"""Play a PC2 or MDD point cache on an OBJ in Blender (an independent reader).
 
 usage:
   blender -b --factory-startup --python tools/blender/eval_pc2.py -- \\
       MESH.obj CACHE.pc2 --frames 0,1,2 [--out result.json]
       [--importer legacy|new] [--frame-start F]
 
-Imports MESH.obj, adds a Mesh Cache modifier (format PC2) reading CACHE.pc2,
+Imports MESH.obj, adds a Mesh Cache modifier (format PC2, or MDD for a .mdd
+CACHE: big-endian frame count, point count, frame times, points) reading it,
 and reports the depsgraph-evaluated positions at the given scene frames in
 the OBJ/PC2 file's own Y-up coordinates, so they compare 1:1 with the cache.
 
@@ -81,7 +82,21 @@ def parse_args():
     return o
 
 
+def read_mdd_header(path):
+    """MDD: big-endian i32 frames, i32 points, then f32 times; reported in the PC2 header's terms."""
+    with open(path, "rb") as f:
+        head = f.read(8)
+        if len(head) < 8:
+            die("%s is not an MDD file" % path, 1)
+        frames, n = struct.unpack(">ii", head)
+        times = struct.unpack(">%df" % frames, f.read(4 * frames)) if frames > 0 else ()
+    return {"version": "mdd", "num_points": n, "start_frame": 0.0, "sample_rate": 1.0,
+            "num_samples": frames, "times": list(times[:3])}
+
+
 def read_pc2_header(path):
+    if path.lower().endswith(".mdd"):
+        return read_mdd_header(path)
     with open(path, "rb") as f:
         head = f.read(32)
     if len(head) < 32 or head[:12] != b"POINTCACHE2\0":
@@ -117,7 +132,7 @@ def main():
             % (nverts, header["num_points"]), 1)
 
     md = ob.modifiers.new("pc2", "MESH_CACHE")
-    md.cache_format = "PC2"
+    md.cache_format = "MDD" if pc2_path.lower().endswith(".mdd") else "PC2"
     md.filepath = pc2_path
     md.time_mode = "FRAME"  # sample = frame - frame_start (header start/rate ignored)
     md.play_mode = "SCENE"
