@@ -146,6 +146,7 @@ impl Value<'_> {
 /// per process.
 static USD_WRITER: PyOnceLock<Py<PyModule>> = PyOnceLock::new();
 static USD_READER: PyOnceLock<Py<PyModule>> = PyOnceLock::new();
+static USD_VALIDATOR: PyOnceLock<Py<PyModule>> = PyOnceLock::new();
 
 fn embedded<'py>(
     py: Python<'py>,
@@ -219,6 +220,26 @@ pub fn write_usd(function: &str, spec: &Value<'_>, path: &Path) -> Result<(), Br
         let spec = spec.to_py(py)?;
         writer.call_method1(function, (spec, path.to_string_lossy().into_owned()))?;
         Ok(())
+    })
+}
+
+/// One finding of [`validate_usd`]: severity (`error` / `warning`), where, what.
+pub type UsdFinding = (String, String, String);
+
+/// usd-core's UsdValidation validators on the stage at `path`, then the UsdSkel binding rules of
+/// every skinned mesh (joint index range, element size, weight sums, blend shape / target
+/// counts, finite time samples). A file usd-core cannot open is one error, not an `Err`.
+pub fn validate_usd(path: &Path) -> Result<Vec<UsdFinding>, BridgeError> {
+    Python::attach(|py| {
+        let module = embedded(
+            py,
+            &USD_VALIDATOR,
+            include_str!("usd_validator.py"),
+            c"usd_validator.py",
+            c"garmentbake_usd_validator",
+        )?;
+        let found = module.call_method1("validate", (path.to_string_lossy().into_owned(),))?;
+        Ok(found.extract()?)
     })
 }
 

@@ -39,6 +39,11 @@ pub struct Args {
     /// Add the body mesh on the same skeleton.
     #[arg(long)]
     pub with_body: bool,
+    /// Check what was written as `garmentbake validate` does: its structure, and (glTF) its
+    /// replay against the network on every clip within --tolerance-mm (default 1 mm); exit 1
+    /// when it fails.
+    #[arg(long)]
+    pub validate: bool,
     #[command(flatten)]
     pub compute: ComputeArgs,
     #[command(flatten)]
@@ -51,6 +56,52 @@ pub struct Report {
     pub out: PathBuf,
     pub bytes: u64,
     pub report: BakeReport,
+    /// With --validate: one check per clip (glTF) or one for the file (USD).
+    pub validation: Option<Vec<Validation>>,
+}
+
+/// `validate` on the written file.
+#[derive(Serialize)]
+pub struct Validation {
+    pub clip: Option<String>,
+    pub passed: bool,
+    pub errors: Vec<crate::validate::Problem>,
+    pub replay: Option<crate::validate::replay::ReplayError>,
+}
+
+impl Args {
+    /// `validate` on the file just written: per clip against the network for glTF (USD replay is
+    /// not implemented: its structure once).
+    fn check_written(
+        &self,
+        model: &crate::models::file::ModelFile,
+        clips: &[crate::rig::SkelAnimation],
+        device: tch::Device,
+    ) -> Result<Vec<Validation>> {
+        use crate::validate::{check_file, replay::Reference};
+        let tolerance = self.tolerance_mm.map_or(1.0, f64::from);
+        let gltf = exporters::FileKind::of(&self.out) == Some(exporters::FileKind::Gltf);
+        let references: Vec<Option<Reference>> = if gltf {
+            clips
+                .iter()
+                .map(|c| Reference::of(model, c, device).map(Some))
+                .collect::<Result<_>>()?
+        } else {
+            vec![None]
+        };
+        references
+            .iter()
+            .map(|r| {
+                let checked = check_file(&self.out, r.as_ref(), tolerance)?;
+                Ok(Validation {
+                    clip: r.as_ref().map(|r| r.clip.clone()),
+                    passed: checked.problems.passed(),
+                    errors: checked.problems.errors,
+                    replay: checked.replay,
+                })
+            })
+            .collect()
+    }
 }
 
 impl Execute for Args {
@@ -80,10 +131,15 @@ impl Execute for Args {
         let (asset, report) = bake(&model, &clips, &opts, device)?;
         exporters::write(&asset, &self.out)
             .with_context(|| format!("writing {}", self.out.display()))?;
+        let validation = self
+            .validate
+            .then(|| self.check_written(&model, &clips, device))
+            .transpose()?;
         Ok(Report {
             out: self.out.clone(),
             bytes: std::fs::metadata(&self.out).map(|m| m.len()).unwrap_or(0),
             report,
+            validation,
         })
     }
 
@@ -106,5 +162,24 @@ impl Execute for Args {
             );
         }
         println!("wrote {} ({:.1} MB)", r.out.display(), r.bytes as f64 / 1e6);
+        for v in r.validation.iter().flatten() {
+            let clip = v.clip.as_deref().unwrap_or("structure");
+            let verdict = if v.passed { "passes" } else { "FAILS" };
+            match &v.replay {
+                Some(x) => println!(
+                    "validate {clip}: {verdict}; replay max {:.4} mm, mean {:.4} mm, p99 {:.4} mm",
+                    x.max_mm, x.mean_mm, x.p99_mm
+                ),
+                None => println!("validate {clip}: {verdict}"),
+            }
+            for e in &v.errors {
+                println!("  error {}: {}", e.at, e.message);
+            }
+        }
+    }
+
+    fn exit_code(r: &Report) -> i32 {
+        let failed = r.validation.iter().flatten().any(|v| !v.passed);
+        i32::from(failed)
     }
 }

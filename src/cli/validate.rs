@@ -2,11 +2,9 @@
 
 use super::args::{ClipArgs, ComputeArgs, OutputArgs};
 use super::Execute;
-use crate::validate::cache::{check_against_clip, check_mdd, check_pc2};
-use crate::validate::replay::{compare, error_png, replay_gltf, Reference, ReplayError};
-use crate::validate::{check_gltf, Problem, Problems};
-use anyhow::{bail, Context, Result};
-use exporters::FileKind;
+use crate::validate::replay::{error_png, Reference, ReplayError};
+use crate::validate::{check_file, checkable, Checked, Problem};
+use anyhow::{bail, Result};
 use serde::Serialize;
 use std::path::PathBuf;
 
@@ -20,6 +18,10 @@ use std::path::PathBuf;
 /// times, output counts), channel targets, an acyclic node tree, skins whose joints and inverse
 /// bind matrices agree. Tolerances are the Khronos validator's.
 ///
+/// USD (through usd-core): its UsdValidation validators, then the UsdSkel bindings (joint
+/// indices inside the skeleton, element sizes, weight sums, blend shape / target counts, finite
+/// time samples).
+///
 /// PC2 / MDD: the header, the size it announces (a cut-off file says so), finite points; MDD
 /// frame times strictly increasing and evenly spaced (their spacing is the rate).
 ///
@@ -32,7 +34,8 @@ use std::path::PathBuf;
 /// pointer), 2 it could not be read at all (missing file, unknown extension, bad options).
 #[derive(clap::Args)]
 pub struct Args {
-    /// The file to check: .glb / .gltf, or a point cache .pc2 / .mdd.
+    /// The file to check: .glb / .gltf, a point cache .pc2 / .mdd, or USD .usd / .usda / .usdc /
+    /// .usdz.
     pub file: PathBuf,
     /// The model the file was made from (.safetensors): replay the file against it.
     #[arg(long, requires = "motion")]
@@ -88,92 +91,19 @@ impl Args {
     }
 }
 
-impl Args {
-    /// Structure of a glTF, then its replay against the model.
-    fn gltf(
-        &self,
-        bytes: &[u8],
-        reference: Option<&Reference>,
-        p: &mut Problems,
-    ) -> Option<ReplayError> {
-        let checked = check_gltf(&self.file, bytes, p);
-        let (Some(reference), Some(doc), Some(accessors), true) =
-            (reference, &checked.document, &checked.accessors, p.passed())
-        else {
-            return None;
-        };
-        replay_gltf(doc, accessors, reference, self.tolerance_mm)
-            .map_err(|reason| p.error("replay", reason))
-            .ok()
-    }
-
-    /// Structure of a PC2 / MDD, then its frames against the model's (same vertex order, as
-    /// `eval` writes them).
-    fn cache(
-        &self,
-        kind: FileKind,
-        bytes: &[u8],
-        reference: Option<&Reference>,
-        p: &mut Problems,
-    ) -> Option<ReplayError> {
-        let cache = match kind {
-            FileKind::Mdd => check_mdd(bytes, p),
-            _ => check_pc2(bytes, p),
-        }?;
-        let reference = reference?;
-        let vertices = reference.vertex_count();
-        check_against_clip(
-            &cache,
-            reference.frames.len(),
-            reference.fps as f64,
-            vertices,
-            p,
-        );
-        if !p.passed() {
-            return None;
-        }
-        let identity: Vec<u32> = (0..vertices as u32).collect();
-        Some(compare(reference, &identity, self.tolerance_mm, |f| {
-            cache.frames[f].iter().map(|q| q.map(f64::from)).collect()
-        }))
-    }
-}
-
 impl Execute for Args {
     type Report = Report;
 
     fn execute(&self, _say: &dyn Fn(&str)) -> Result<Report> {
         let path = &self.file;
-        let kinds = [FileKind::Gltf, FileKind::Pc2, FileKind::Mdd];
-        let Some(kind) = FileKind::of(path).filter(|k| kinds.contains(k)) else {
-            bail!(
-                "{}: cannot validate this kind of file; use {}",
-                path.display(),
-                FileKind::extension_list(&kinds, true)
-            );
-        };
+        let kind = checkable(path)?;
         if !self.tolerance_mm.is_finite() || self.tolerance_mm <= 0.0 {
             bail!("--tolerance-mm must be positive, got {}", self.tolerance_mm);
         }
-        let bytes =
-            std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
         let reference = self.reference()?;
-        let mut problems = Problems::default();
-        let replay = match kind {
-            FileKind::Gltf => self.gltf(&bytes, reference.as_ref(), &mut problems),
-            _ => self.cache(kind, &bytes, reference.as_ref(), &mut problems),
-        };
+        let Checked { problems, replay } = check_file(path, reference.as_ref(), self.tolerance_mm)?;
         let mut png = None;
         if let (Some(r), Some(reference)) = (&replay, &reference) {
-            if !r.passed {
-                problems.error(
-                    "replay",
-                    format!(
-                        "max error {:.3} mm (frame {}, vertex {}) exceeds the tolerance of {} mm",
-                        r.max_mm, r.worst_frame, r.worst_vertex, r.tolerance_mm
-                    ),
-                );
-            }
             if let Some(path) = &self.png {
                 error_png(reference, r, path)?;
                 png = Some(path.clone());

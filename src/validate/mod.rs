@@ -8,7 +8,11 @@ pub mod container;
 pub mod replay;
 pub mod scene;
 pub mod structure;
+pub mod usd;
 
+use anyhow::{bail, Context, Result};
+use exporters::FileKind;
+use replay::{compare, replay_gltf, Reference, ReplayError};
 use serde::Serialize;
 use std::path::Path;
 
@@ -84,4 +88,112 @@ pub fn check_gltf(path: &Path, bytes: &[u8], problems: &mut Problems) -> Checked
         document,
         accessors,
     }
+}
+
+/// The kinds of file `validate` checks.
+pub const CHECKABLE: [FileKind; 4] = [FileKind::Gltf, FileKind::Pc2, FileKind::Mdd, FileKind::Usd];
+
+/// The kind of `path` when it is one `validate` checks; else the error naming the extensions.
+pub fn checkable(path: &Path) -> Result<FileKind> {
+    match FileKind::of(path).filter(|k| CHECKABLE.contains(k)) {
+        Some(kind) => Ok(kind),
+        None => bail!(
+            "{}: cannot validate this kind of file; use {}",
+            path.display(),
+            FileKind::extension_list(&CHECKABLE, true)
+        ),
+    }
+}
+
+/// What checking one file found.
+pub struct Checked {
+    pub problems: Problems,
+    /// The replay against the model, when a reference was given and the structure allowed it.
+    pub replay: Option<ReplayError>,
+}
+
+/// Checks the file at `path`: its structure, then (with `reference`) its replay against the
+/// model; a replay above `tolerance_mm` is an error. `Err` only when it cannot be read at all.
+pub fn check_file(
+    path: &Path,
+    reference: Option<&Reference>,
+    tolerance_mm: f64,
+) -> Result<Checked> {
+    let kind = checkable(path)?;
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let mut p = Problems::default();
+    let replay = match kind {
+        FileKind::Gltf => gltf(path, &bytes, reference, tolerance_mm, &mut p),
+        FileKind::Usd => {
+            usd::check_usd(path, &mut p)?;
+            if reference.is_some() {
+                p.warning("replay", "not implemented for USD yet: structure only");
+            }
+            None
+        }
+        _ => point_cache(kind, &bytes, reference, tolerance_mm, &mut p),
+    };
+    if let Some(r) = replay.as_ref().filter(|r| !r.passed) {
+        p.error(
+            "replay",
+            format!(
+                "max error {:.3} mm (frame {}, vertex {}) exceeds the tolerance of {} mm",
+                r.max_mm, r.worst_frame, r.worst_vertex, r.tolerance_mm
+            ),
+        );
+    }
+    Ok(Checked {
+        problems: p,
+        replay,
+    })
+}
+
+/// Structure of a glTF, then its replay against the model.
+fn gltf(
+    path: &Path,
+    bytes: &[u8],
+    reference: Option<&Reference>,
+    tolerance_mm: f64,
+    p: &mut Problems,
+) -> Option<ReplayError> {
+    let checked = check_gltf(path, bytes, p);
+    let (Some(reference), Some(doc), Some(accessors), true) =
+        (reference, &checked.document, &checked.accessors, p.passed())
+    else {
+        return None;
+    };
+    replay_gltf(doc, accessors, reference, tolerance_mm)
+        .map_err(|reason| p.error("replay", reason))
+        .ok()
+}
+
+/// Structure of a PC2 / MDD, then its frames against the model's (same vertex order, as `eval`
+/// writes them).
+fn point_cache(
+    kind: FileKind,
+    bytes: &[u8],
+    reference: Option<&Reference>,
+    tolerance_mm: f64,
+    p: &mut Problems,
+) -> Option<ReplayError> {
+    let cache = match kind {
+        FileKind::Mdd => cache::check_mdd(bytes, p),
+        _ => cache::check_pc2(bytes, p),
+    }?;
+    let reference = reference?;
+    let vertices = reference.vertex_count();
+    cache::check_against_clip(
+        &cache,
+        reference.frames.len(),
+        reference.fps as f64,
+        vertices,
+        p,
+    );
+    if !p.passed() {
+        return None;
+    }
+    let identity: Vec<u32> = (0..vertices as u32).collect();
+    Some(compare(reference, &identity, tolerance_mm, |f| {
+        cache.frames[f].iter().map(|q| q.map(f64::from)).collect()
+    }))
 }

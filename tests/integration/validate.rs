@@ -788,7 +788,8 @@ fn validate_against_model(file: &Path, fps: &str, extra: &[&str]) -> (Option<i32
 #[test]
 fn replay_against_the_model() {
     let dir = out_dir("validate_replay");
-    let base_path = bake(&dir, "base.glb", &[]);
+    // bake --validate runs the same checks on what it wrote (exit 0 when they pass).
+    let base_path = bake(&dir, "base.glb", &["--validate"]);
     let base = std::fs::read(&base_path).unwrap();
     let (code, good) = validate_against_model(&base_path, "30", &[]);
     assert_eq!(code, Some(0), "{good}");
@@ -952,4 +953,42 @@ fn point_caches() {
             .fold(0.0, f64::max);
         assert!(worst < 1e-5, "frame {frame}: Blender differs by {worst} m");
     }
+}
+
+#[test]
+fn usd_files() {
+    let dir = out_dir("validate_usd");
+    let baked = bake(&dir, "skirt.usda", &["--max-targets", "8", "--validate"]);
+    let posed = dir.join("pose.usdc");
+    garmentbake_ok(&[
+        "pose",
+        "--body",
+        sample("body.glb").to_str().unwrap(),
+        "--motion",
+        sample("motions/131_01.bvh").to_str().unwrap(),
+        "--fps",
+        "10",
+        "--out",
+        posed.to_str().unwrap(),
+    ]);
+    for file in [&baked, &posed] {
+        let (code, report) = validate_json(file, &[]);
+        assert_eq!(code, Some(0), "{report}");
+    }
+    let text = std::fs::read_to_string(&baked).unwrap();
+    let garbled = dir.join("garbled.usda");
+    std::fs::write(&garbled, &text[..text.len() / 3]).unwrap();
+    let (code, report) = validate_json(&garbled, &[]);
+    assert!(first_error(code, &report).contains("cannot open the USD stage"));
+    let past = dir.join("joints.usda");
+    let needle = "primvars:skel:jointIndices = [";
+    let at = text.find(needle).unwrap() + needle.len();
+    let end = at + text[at..].find(',').unwrap();
+    std::fs::write(&past, format!("{}40{}", &text[..at], &text[end..])).unwrap();
+    let (code, report) = validate_json(&past, &[]);
+    let e = first_error(code, &report);
+    assert!(
+        e.contains("jointIndices hold 40") && e.contains("31 joints"),
+        "{e}"
+    );
 }
