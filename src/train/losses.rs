@@ -2,24 +2,30 @@
 //! `x: [B, N, 3]`. Every energy is summed over the garment and averaged over the batch; the
 //! metric next to it is the figure the papers report (and `eval` prints).
 
+use super::fused::ClothArrays;
 use crate::fabric::{Fabric, GRAVITY};
 use crate::geometry::{Topology, TriMesh};
 use anyhow::Result;
 use tch::{Device, Kind, Tensor};
 
-/// Constant tensors describing the garment for the losses.
+/// Constant tensors describing the garment for the losses. Index lists are concatenated (both
+/// ends of every edge, the three corners of every face, both faces of every hinge) so that one
+/// gather fetches them all.
 pub struct Cloth {
-    edge_a: Tensor,
-    edge_b: Tensor,
+    /// First ends, then second ends `[2E]`.
+    edge_ends: Tensor,
     rest_length: Tensor,
     edge_weight: Tensor,
-    face: [Tensor; 3],
-    hinge_a: Tensor,
-    hinge_b: Tensor,
+    /// Corners 0, then 1, then 2 of every face `[3F]`.
+    face_corners: Tensor,
+    /// First faces, then second faces of every hinge `[2H]`.
+    hinge_faces: Tensor,
     hinge_weight: Tensor,
     /// Lumped vertex mass, kg.
     mass: Tensor,
     pinned: Tensor,
+    /// The same on the CPU, for [`super::fused::potential`].
+    pub arrays: ClothArrays,
 }
 
 impl Cloth {
@@ -45,35 +51,48 @@ impl Cloth {
             .iter()
             .map(|a| a * fabric.density)
             .collect();
+        let t = &mesh.triangles;
+        let arrays = ClothArrays {
+            edges: e.clone(),
+            rest_length: e.iter().map(|&e| len(e)).collect(),
+            edge_weight: e.iter().map(|&e| mean(&edge_mul, e)).collect(),
+            faces: t.clone(),
+            hinges: h.iter().map(|h| h.faces).collect(),
+            hinge_weight: h.iter().map(|h| mean(&bend_mul, h.edge)).collect(),
+            mass,
+        };
         Ok(Cloth {
-            edge_a: idx(e.iter().map(|e| e[0] as i64).collect()),
-            edge_b: idx(e.iter().map(|e| e[1] as i64).collect()),
-            rest_length: f32s(e.iter().map(|&e| len(e)).collect()),
-            edge_weight: f32s(e.iter().map(|&e| mean(&edge_mul, e)).collect()),
-            face: [0, 1, 2].map(|k| idx(mesh.triangles.iter().map(|t| t[k] as i64).collect())),
-            hinge_a: idx(h.iter().map(|h| h.faces[0] as i64).collect()),
-            hinge_b: idx(h.iter().map(|h| h.faces[1] as i64).collect()),
-            hinge_weight: f32s(h.iter().map(|h| mean(&bend_mul, h.edge)).collect()),
-            mass: f32s(mass),
+            edge_ends: idx((0..2)
+                .flat_map(|k| e.iter().map(move |e| e[k] as i64))
+                .collect()),
+            rest_length: f32s(arrays.rest_length.clone()),
+            edge_weight: f32s(arrays.edge_weight.clone()),
+            face_corners: idx((0..3)
+                .flat_map(|k| t.iter().map(move |t| t[k] as i64))
+                .collect()),
+            hinge_faces: idx((0..2)
+                .flat_map(|k| h.iter().map(move |h| h.faces[k] as i64))
+                .collect()),
+            hinge_weight: f32s(arrays.hinge_weight.clone()),
+            mass: f32s(arrays.mass.clone()),
             pinned: idx(pinned.iter().map(|&v| v as i64).collect()),
+            arrays,
         })
     }
 
     /// `Σ w_e (|e| − |e_T|)²`; metric: mean |e − e_T| (m).
     pub fn edge(&self, x: &Tensor) -> (Tensor, Tensor) {
-        let d = x.index_select(1, &self.edge_a) - x.index_select(1, &self.edge_b);
-        let length = (d.square().sum_dim_intlist(-1, false, Kind::Float) + 1e-12).sqrt();
+        let [a, b] = split_rows::<2>(&rows(x, &self.edge_ends));
+        let length = ((a - b).square().sum_dim_intlist(-1, false, Kind::Float) + 1e-12).sqrt();
         let error = length - &self.rest_length;
-        let energy = (error.square() * &self.edge_weight)
-            .sum_dim_intlist(1, false, Kind::Float)
-            .mean(Kind::Float);
+        let energy = error.square().matmul(&self.edge_weight).mean(Kind::Float);
         (energy, error.detach().abs().mean(Kind::Float))
     }
 
     /// Unit face normals `[B, F, 3]`.
     pub fn face_normals(&self, x: &Tensor) -> Tensor {
-        let [a, b, c] = self.face.each_ref().map(|f| x.index_select(1, f));
-        let n = (&b - &a).linalg_cross(&(c - a), -1);
+        let [a, b, c] = split_rows::<3>(&rows(x, &self.face_corners));
+        let n = (b - &a).linalg_cross(&(c - a), -1);
         let len = n
             .square()
             .sum_dim_intlist(-1, true, Kind::Float)
@@ -82,27 +101,18 @@ impl Cloth {
         n / len
     }
 
-    /// `Σ w_h |n_a − n_b|²` over face-adjacent pairs; metric: mean (1 − cos).
+    /// `Σ w_h |n_a − n_b|²` over face-adjacent pairs; metric: mean (1 − cos), which for unit
+    /// normals is `|n_a − n_b|² / 2`.
     pub fn bend(&self, x: &Tensor) -> (Tensor, Tensor) {
-        let n = self.face_normals(x);
-        let (na, nb) = (
-            n.index_select(1, &self.hinge_a),
-            n.index_select(1, &self.hinge_b),
-        );
-        let energy = ((&na - &nb).square().sum_dim_intlist(-1, false, Kind::Float)
-            * &self.hinge_weight)
-            .sum_dim_intlist(1, false, Kind::Float)
-            .mean(Kind::Float);
-        let cos = (na.detach() * nb.detach()).sum_dim_intlist(-1, false, Kind::Float);
-        (energy, (cos.neg() + 1.0).mean(Kind::Float))
+        let [na, nb] = split_rows::<2>(&rows(&self.face_normals(x), &self.hinge_faces));
+        let gap = (na - nb).square().sum_dim_intlist(-1, false, Kind::Float);
+        let energy = gap.matmul(&self.hinge_weight).mean(Kind::Float);
+        (energy, gap.detach().mean(Kind::Float) * 0.5)
     }
 
     /// `Σ m_i g y_i` (J); the metric is the same energy.
     pub fn gravity(&self, x: &Tensor) -> (Tensor, Tensor) {
-        let energy = (x.select(2, 1) * &self.mass)
-            .sum_dim_intlist(1, false, Kind::Float)
-            .mean(Kind::Float)
-            * GRAVITY as f64;
+        let energy = x.select(2, 1).matmul(&self.mass).mean(Kind::Float) * GRAVITY as f64;
         let metric = energy.detach();
         (energy, metric)
     }
@@ -118,6 +128,19 @@ impl Cloth {
             .sum_dim_intlist([1i64, 2].as_slice(), false, Kind::Float)
             .mean(Kind::Float)
     }
+}
+
+/// Rows `index` of `x: [B, N, 3]` along the vertex axis, `[B, len, 3]`. A gather: its backward
+/// is one scatter-add, where `index_select`'s is an `index_add` that runs a kernel per index.
+fn rows(x: &Tensor, index: &Tensor) -> Tensor {
+    let b = x.size()[0];
+    x.gather(1, &index.view([1, -1, 1]).expand([b, -1, 3], false), false)
+}
+
+/// `[B, K·L, 3]` rows fetched for K concatenated index lists, as K views `[B, L, 3]`.
+fn split_rows<const K: usize>(rows: &Tensor) -> [Tensor; K] {
+    let len = rows.size()[1] / K as i64;
+    std::array::from_fn(|k| rows.narrow(1, k as i64 * len, len))
 }
 
 /// `Σ min(d·n − ε, 0)²` with `d` from each vertex's nearest body vertex and `n` its normal;

@@ -3,6 +3,7 @@
 
 pub mod adam;
 pub mod dynamic;
+pub mod fused;
 pub mod losses;
 pub mod motion;
 pub mod nearest;

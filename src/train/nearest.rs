@@ -8,6 +8,7 @@
 //! an argmin). The garment moves little between refreshes, so the true nearest vertex stays in
 //! the list; the reference code instead called a CPU k-d tree from its GPU loop every step.
 
+use super::fused::Contacts;
 use crate::body::Body;
 use crate::geometry::PointIndex;
 use crate::rig::JointTransform;
@@ -19,6 +20,12 @@ use tch::{Device, Kind, Tensor};
 /// Points, normals and tree of the body subset in one pose.
 type PosedSubset = (Vec<[f32; 3]>, Vec<[f32; 3]>, PointIndex);
 
+struct CpuCopy {
+    points: Vec<[f32; 3]>,
+    normals: Vec<[f32; 3]>,
+    candidates: Vec<i64>,
+}
+
 pub struct Correspondences {
     /// Posed body vertices (the subset near the garment) of all poses, `[P * M, 3]`.
     points: Tensor,
@@ -27,6 +34,8 @@ pub struct Correspondences {
     trees: Arc<Vec<PointIndex>>,
     /// Candidate rows of `points`, `[P, N, C]`.
     candidates: Tensor,
+    /// On the CPU: `points`, `normals` and `candidates` as arrays, for [`super::fused`].
+    cpu: Option<CpuCopy>,
     subset: usize,
     per_vertex: usize,
 }
@@ -66,6 +75,11 @@ impl Correspondences {
         };
         let points = flat(&|x| &x.0);
         let normals = flat(&|x| &x.1);
+        let cpu = (device == Device::Cpu).then(|| CpuCopy {
+            points: posed.iter().flat_map(|x| x.0.iter().copied()).collect(),
+            normals: posed.iter().flat_map(|x| x.1.iter().copied()).collect(),
+            candidates: vec![0; poses.len() * garment_vertices * per_vertex],
+        });
         let trees = Arc::new(posed.into_iter().map(|x| x.2).collect());
         Correspondences {
             points,
@@ -79,9 +93,25 @@ impl Correspondences {
                 ],
                 (Kind::Int64, device),
             ),
+            cpu,
             subset: subset.len(),
             per_vertex,
         }
+    }
+
+    /// The batch's candidates and the posed body as arrays (CPU training only).
+    pub fn contacts(&self, poses: &[i64]) -> Option<Contacts<'_>> {
+        let cpu = self.cpu.as_ref()?;
+        let per_pose = cpu.candidates.len() / self.candidates.size()[0].max(1) as usize;
+        Some(Contacts {
+            candidates: poses
+                .iter()
+                .map(|&p| &cpu.candidates[p as usize * per_pose..(p as usize + 1) * per_pose])
+                .collect(),
+            per_vertex: self.per_vertex,
+            points: &cpu.points,
+            normals: &cpu.normals,
+        })
     }
 
     /// Body vertices considered (the subset near the garment).
@@ -132,6 +162,9 @@ impl Correspondences {
                 .collect()
         });
         self.candidates = Tensor::cat(&lists, 0).to_device(self.candidates.device());
+        if let Some(cpu) = &mut self.cpu {
+            cpu.candidates = crate::models::pbns::flat(&self.candidates, Kind::Int64);
+        }
     }
 
     /// The same, computed on a worker thread (the k-d tree queries use the rayon pool while
@@ -148,6 +181,9 @@ impl Correspondences {
         self.candidates = Tensor::from_slice(&lists)
             .view(shape.as_slice())
             .to_device(self.candidates.device());
+        if let Some(cpu) = &mut self.cpu {
+            cpu.candidates = lists;
+        }
     }
 
     /// Nearest body point and normal `[B, N, 3]` for the batch's poses `[B]` and garment `x`.

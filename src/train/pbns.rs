@@ -2,6 +2,7 @@
 //! potential, validation metrics; the shared loop (`super::fit`) runs the epochs.
 
 use super::adam::Adam;
+use super::fused;
 use super::losses::{self, Cloth, TERM_NAMES};
 use super::nearest::{self, Correspondences};
 use super::poses::{self, PoseSet};
@@ -185,6 +186,7 @@ impl Inputs {
 pub fn set_training_threads(threads: usize) {
     let others = threads.saturating_sub(1).max(1);
     crate::compute::set_threads(others, others);
+    crate::compute::reuse_freed_memory();
 }
 
 /// Wall time per phase of the training steps.
@@ -636,25 +638,42 @@ impl Trainer {
         let batch = self.train.select(&index);
         let out = self.model().forward(&batch);
         let t1 = Instant::now();
-        let (body_points, body_normals) = self.correspondences.resolve(&index, &out.vertices);
-        let t2 = Instant::now();
         let fabric = &self.file.info.fabric;
-        let terms = losses::potential(
-            &self.cloth,
-            fabric,
-            &out.vertices,
-            &out.displacement,
-            &body_points,
-            &body_normals,
-        );
-        let loss = terms.total();
-        let mut all: Vec<Tensor> = terms.weighted.iter().map(Tensor::detach).collect();
-        all.extend(terms.metrics.iter().map(Tensor::shallow_clone));
-        let values: Vec<f64> = flat(&Tensor::stack(&all, 0), Kind::Double);
+        let (loss, values, t2) = match self.correspondences.contacts(ids) {
+            // On the CPU: the fused potential, candidate lookup included.
+            Some(contacts) => {
+                let x = &out.vertices;
+                let xs: Vec<f32> = flat(x, Kind::Float);
+                let f = fused::potential(&self.cloth.arrays, fabric, &xs, ids.len(), &contacts);
+                let pin = self.cloth.pin(&out.displacement) * fabric.pin as f64;
+                let mut values = f.weighted.to_vec();
+                values.push(pin.double_value(&[]));
+                values.extend(f.metrics);
+                // Σ x·∇E has the gradient ∇E at x: autograd takes it through LBS and the network.
+                let grad = Tensor::from_slice(&f.grad).view(x.size().as_slice());
+                ((x * &grad).sum(Kind::Float) + pin, values, t1)
+            }
+            None => {
+                let (body_points, body_normals) =
+                    self.correspondences.resolve(&index, &out.vertices);
+                let t2 = Instant::now();
+                let terms = losses::potential(
+                    &self.cloth,
+                    fabric,
+                    &out.vertices,
+                    &out.displacement,
+                    &body_points,
+                    &body_normals,
+                );
+                let mut all: Vec<Tensor> = terms.weighted.iter().map(Tensor::detach).collect();
+                all.extend(terms.metrics.iter().map(Tensor::shallow_clone));
+                let values: Vec<f64> = flat(&Tensor::stack(&all, 0), Kind::Double);
+                (terms.total(), values, t2)
+            }
+        };
         let t3 = Instant::now();
         let named: Vec<(&'static str, f64)> = TERM_NAMES.into_iter().zip(values.clone()).collect();
         Blowup::check(&named, self.epoch() + 1, self.adam.step as usize + 1)?;
-        loss.backward();
         let named = self.model().parameters(self.settings.train_weights);
         // The skin logits move on another scale than the network (a weight going from 1e-4 to
         // 0.5 is a logit change of ~9): they get a larger learning rate.
@@ -669,7 +688,10 @@ impl Trainer {
             })
             .collect();
         let params: Vec<Tensor> = named.into_iter().map(|(_, t)| t.shallow_clone()).collect();
-        self.adam.update(&params, &rates);
+        // Gradients handed straight to Adam: none accumulates in (or is zeroed from) the
+        // parameters' .grad.
+        let grads = Tensor::run_backward(&[&loss], &params, false, false);
+        self.adam.update_with(&params, &grads, &rates);
         let t4 = Instant::now();
         let times = &mut self.times;
         times.forward += t1 - t0;

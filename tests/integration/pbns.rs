@@ -12,7 +12,8 @@ use garmentbake::models::file::{self, check_skeleton};
 use garmentbake::models::pbns::flat;
 use garmentbake::models::pose_features::tensor_points;
 use garmentbake::motion::load_clip;
-use garmentbake::train::losses::{collision, Cloth};
+use garmentbake::train::fused;
+use garmentbake::train::losses::{collision, potential, Cloth};
 use garmentbake::train::pbns::{Inputs, Settings, Trainer};
 use garmentbake::train::{fit_every, CheckpointEvery, FitOptions, Training};
 use std::path::{Path, PathBuf};
@@ -138,6 +139,62 @@ fn loss_terms_match_hand_computed_values() {
     let (c, cm) = collision(&below, &bp, &bn, 0.004);
     assert!((scalar(&c) - 3.0 * 0.014f64.powi(2)).abs() < 1e-7);
     assert!((scalar(&cm) - 0.75).abs() < 1e-7);
+}
+
+#[test]
+fn the_fused_cpu_potential_matches_the_tensor_potential_and_its_gradient() {
+    // The training step on the CPU uses train::fused (energies and gradient written out); the
+    // tensor potential with autograd is the reference. Real data: the skirt after an epoch, four
+    // training poses, the trainer's own candidate lists.
+    let _g = serial();
+    let t = trained(6, 1);
+    let ids = [0i64, 1, 2, 3];
+    let index = Tensor::from_slice(&ids);
+    let out = t.model().forward(&t.train_batch().select(&index));
+    let x = out.vertices.detach().set_requires_grad(true);
+    let cloth = Cloth::new(&t.file.garment, t.fabric(), &[], Device::Cpu).unwrap();
+    let (points, normals) = t.correspondences().resolve(&index, &x);
+    let terms = potential(&cloth, t.fabric(), &x, &out.displacement, &points, &normals);
+    let [e, b, c, g, _pin] = &terms.weighted;
+    let total = e + b + c + g;
+    let reference_grad = flat::<f32>(
+        &Tensor::run_backward(&[&total], &[&x], false, false)[0],
+        Kind::Float,
+    );
+    let contacts = t.correspondences().contacts(&ids).unwrap();
+    let xs: Vec<f32> = flat(&x, Kind::Float);
+    let f = fused::potential(&cloth.arrays, t.fabric(), &xs, ids.len(), &contacts);
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-4 * b.abs().max(1e-6);
+    for (k, term) in terms.weighted[..4].iter().enumerate() {
+        assert!(
+            close(f.weighted[k], scalar(term)),
+            "term {k}: {} vs {}",
+            f.weighted[k],
+            scalar(term)
+        );
+    }
+    for (k, metric) in terms.metrics.iter().enumerate() {
+        assert!(
+            close(f.metrics[k], scalar(metric)),
+            "metric {k}: {} vs {}",
+            f.metrics[k],
+            scalar(metric)
+        );
+    }
+    assert!(
+        f.weighted[2] > 0.0,
+        "no vertex within the collision margin: the term is untested"
+    );
+    let scale = reference_grad.iter().fold(0f32, |m, v| m.max(v.abs()));
+    let worst = f
+        .grad
+        .iter()
+        .zip(&reference_grad)
+        .fold(0f32, |m, (a, b)| m.max((a - b).abs()));
+    assert!(
+        worst <= 1e-3 * scale,
+        "gradient differs by {worst} (largest entry {scale})"
+    );
 }
 
 #[test]
