@@ -167,12 +167,16 @@ impl Correspondences {
         }
     }
 
-    /// The same, computed on a worker thread (the k-d tree queries use the rayon pool while
-    /// torch keeps training on its own thread); hand the result to [`Correspondences::apply`].
-    pub fn spawn_refresh(&self, garment: Vec<Vec<[f32; 3]>>) -> JoinHandle<Vec<i64>> {
+    /// The same, computed on a worker thread (the garment's prediction and the k-d tree queries
+    /// run there while torch keeps training on its own thread); hand the result to
+    /// [`Correspondences::apply`].
+    pub fn spawn_refresh(
+        &self,
+        garment: impl FnOnce() -> Vec<Vec<[f32; 3]>> + Send + 'static,
+    ) -> JoinHandle<Vec<i64>> {
         let trees = Arc::clone(&self.trees);
         let (m, c) = (self.subset, self.per_vertex);
-        std::thread::spawn(move || candidate_lists(&trees, &garment, m, c))
+        std::thread::spawn(move || candidate_lists(&trees, &garment(), m, c))
     }
 
     /// Installs candidate lists from [`Correspondences::spawn_refresh`].

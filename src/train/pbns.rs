@@ -607,12 +607,13 @@ impl Trainer {
     }
 
     fn start_refresh_from(&mut self, snapshot: Snapshot) {
-        let x = self
-            .model()
-            .with_snapshot(&snapshot)
-            .predict_points(&self.train);
+        // The snapshot's forward pass over every training pose runs on the worker too.
+        let model = self.model().with_snapshot(&snapshot);
+        let poses = self.train.slice(0, self.train.len());
         self.pending = Some(PendingRefresh {
-            job: self.correspondences.spawn_refresh(x),
+            job: self
+                .correspondences
+                .spawn_refresh(move || model.predict_points(&poses)),
             snapshot,
         });
     }
