@@ -151,7 +151,7 @@ pub fn roll_out(
     };
     let mut history: Vec<Tensor> = vec![to_tensor(&out.frames[0], device)];
     progress(0);
-    for t in 1..poses.len() {
+    for (t, pose) in poses.iter().enumerate().skip(1) {
         let mut timing = FrameTiming::default();
         let clock = Instant::now();
         let back = |k: usize| history[history.len().saturating_sub(k)].shallow_clone();
@@ -174,7 +174,7 @@ pub fn roll_out(
         let garment = tch::no_grad(|| space.skin(&canonical, &h.now.transforms));
         timing.decode_ms = ms(clock);
         let clock = Instant::now();
-        let surface = PosedSurface::new(body, &poses[t])?;
+        let surface = PosedSurface::new(body, pose)?;
         let (resolved, before, after, iterations) = resolve_collisions(
             model,
             &canonical,

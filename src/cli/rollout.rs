@@ -39,6 +39,9 @@ pub struct Args {
     /// cache whose first frame is the starting garment (e.g. the clip's simulation).
     #[arg(long, default_value = "rest")]
     pub init: String,
+    /// Play only the first N frames (of the clips in a row).
+    #[arg(long)]
+    pub frames: Option<usize>,
     /// Frames over which a later clip blends in from the previous clip's last pose.
     #[arg(long, default_value_t = 15)]
     pub fade: usize,
@@ -124,7 +127,8 @@ impl Execute for Args {
             .iter()
             .map(|m| Ok(load_clip(m, &maps, skeleton, Some(fps))?.animation))
             .collect::<Result<Vec<_>>>()?;
-        let poses = chain(&clips.iter().collect::<Vec<_>>(), self.fade);
+        let mut poses = chain(&clips.iter().collect::<Vec<_>>(), self.fade);
+        poses.truncate(self.frames.unwrap_or(poses.len()).max(1));
         let n = file.garment.vertex_count();
         let init = match self.init.as_str() {
             "rest" => Init::Rest,
@@ -278,8 +282,10 @@ fn timing(frames: &[FrameTiming]) -> Timing {
         collision_ms: mean(|t| t.collision_ms),
         network_ms: mean(|t| t.inputs_ms + t.encoder_ms + t.decode_ms),
         fixed_frames: fixed.len(),
+        // `+ 0.0`: an empty f64 sum is −0.0.
         ms_per_collision_iteration: fixed.iter().map(|t| t.collision_ms).sum::<f64>()
-            / iterations.max(1) as f64,
+            / iterations.max(1) as f64
+            + 0.0,
     }
 }
 

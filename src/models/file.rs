@@ -50,7 +50,8 @@ pub struct ModelInfo {
 #[serde(tag = "kind", rename_all = "lowercase")]
 pub enum KindInfo {
     Pbns(PbnsInfo),
-    Dynamic(DynamicInfo),
+    /// Boxed: its seeds, ranges and two histories make it far larger than PBNS's description.
+    Dynamic(Box<DynamicInfo>),
 }
 
 impl KindInfo {

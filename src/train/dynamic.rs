@@ -329,7 +329,7 @@ impl SpaceTrainer {
             garment: GarmentInfo::of(&garment, &pinned),
             body: BodyInfo::of(&body),
             fabric,
-            model: KindInfo::Dynamic(DynamicInfo {
+            model: KindInfo::Dynamic(Box::new(DynamicInfo {
                 shape: settings.shape.clone(),
                 seeds: seeds.vertices.clone(),
                 seed_parts: seeds.parts.clone(),
@@ -350,7 +350,7 @@ impl SpaceTrainer {
                 },
                 history: Vec::new(),
                 motion: None,
-            }),
+            })),
         };
         let file = ModelFile {
             model: Model::Dynamic(Box::new(Dynamic {
