@@ -396,8 +396,7 @@ impl SpaceTrainer {
 
     /// Cosine decay from the learning rate to a tenth of it.
     fn learning_rate(&self, epoch: usize) -> f64 {
-        let t = (epoch as f64 / (self.settings.epochs.max(2) - 1) as f64).min(1.0);
-        self.settings.learning_rate * (0.1 + 0.9 * 0.5 * (1.0 + (std::f64::consts::PI * t).cos()))
+        super::cosine_rate(self.settings.learning_rate, epoch, self.settings.epochs)
     }
 
     /// One optimisation step on frames `idx`: the weighted terms and the batch's mean error (m).

@@ -341,3 +341,9 @@ fn blown_up(b: Blowup, epochs_done: usize, checkpoint_epoch: usize, ckpt: &Path)
     };
     anyhow::anyhow!("{b}; {kept} (lower --lr or the fabric's λ for that term, then --resume)")
 }
+
+/// Cosine decay from `rate` at the first epoch to a tenth of it at the last of `epochs`.
+pub fn cosine_rate(rate: f64, epoch: usize, epochs: usize) -> f64 {
+    let t = (epoch as f64 / (epochs.max(2) - 1) as f64).min(1.0);
+    rate * (0.1 + 0.9 * 0.5 * (1.0 + (std::f64::consts::PI * t).cos()))
+}
