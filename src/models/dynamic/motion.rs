@@ -66,8 +66,11 @@ pub struct MotionInputs {
     pub inertia: Tensor,
     /// Per-vertex motion channels `[B, V, 9]` in the root frame at `t`.
     pub motion: Tensor,
-    /// Interaction forces `a_ij · ReLU(−q_ij) · n_j` `[B, V, N, 3]` in the root frame at `t`.
-    pub forces: Tensor,
+    /// The interaction forces `a_ij · ReLU(−q_ij) · n_j` factored: their sizes
+    /// `a_ij · ReLU(−q_ij)` `[B, V, N]` and the seeds' normals `n_j` `[B, N, 3]` in the root
+    /// frame at `t` (the `[B, V, N, 3]` product is never built: `C`'s first layer is linear in it).
+    pub contact: Tensor,
+    pub contact_normals: Tensor,
 }
 
 /// One frame's history and body, batched: garments at `t−1, t−2, t−3` `[B, V, 3]`, the body at
@@ -88,16 +91,24 @@ pub struct StaticInputs {
 }
 
 impl StaticInputs {
-    /// Through the frozen space (no gradients).
+    /// Through the frozen space (no gradients). The three encodes (`g_{t−1}` against the body
+    /// at `t − 1`; the ballistic guess and `g_{t−1}` against the body at `t`) run as one batch,
+    /// and `S(M^P_{t−1})` is the first one's feature map rather than a fourth pass.
     pub fn new(space: &Space, h: &History) -> StaticInputs {
         tch::no_grad(|| {
             let [g1, g2, _] = &h.garment;
             let ballistic = g1 * 2.0 - g2;
-            let now = |g: &Tensor| space.encode(g, &h.now.seeds, &h.now.transforms);
+            let (before, now) = (&h.before, &h.now);
+            let g = Tensor::cat(&[g1, &ballistic, g1], 0);
+            let b = Tensor::cat(&[&before.seeds, &now.seeds, &now.seeds], 0);
+            let m = Tensor::cat(&[&before.transforms, &now.transforms, &now.transforms], 0);
+            let (features, z) = space.encode_keeping_features(&g, &b, &m);
+            let bs = g1.size()[0];
+            let z = z.split(bs, 0);
             StaticInputs {
-                static_features: space.static_features(g1, &h.before.seeds),
-                previous_latent: space.encode(g1, &h.before.seeds, &h.before.transforms),
-                inertia: Tensor::cat(&[now(&ballistic), now(g1)], 1),
+                static_features: features.narrow(0, 0, bs),
+                previous_latent: z[0].shallow_clone(),
+                inertia: Tensor::cat(&[&z[1], &z[2]], 1),
             }
         })
     }
@@ -133,31 +144,34 @@ pub fn motion_inputs(
             .reshape([b, v * 3, 3])
             .bmm(&h.now.root)
             .reshape([b, v, MOTION_CHANNELS]);
-        let forces = interaction(g1, h, sigma)
-            .reshape([b, -1, 3])
-            .bmm(&h.now.root);
         MotionInputs {
             static_features: statics.static_features,
             previous_latent: statics.previous_latent,
             inertia: statics.inertia,
             motion,
-            forces: forces.reshape([b, v, -1, 3]),
+            contact: contact_sizes(g1, h, sigma),
+            contact_normals: h.now.normals.bmm(&h.now.root),
         }
     })
 }
 
-/// `a_ij · ReLU(−q_ij) · n_j` with `q_ij = (g_{t−1,i} − b_{t,j}) · n_{t,j}` (previous garment
-/// against the current seeds' tangent planes) and `a_ij = exp(−|g_{t−1,i} − b_{t−1,j}|² / 2σ²)`
-/// (only seeds that were near the vertex push it), `[B, V, N, 3]`.
-fn interaction(g1: &Tensor, h: &History, sigma: f32) -> Tensor {
-    let normals = h.now.normals.unsqueeze(1);
-    let to_now = g1.unsqueeze(2) - h.now.seeds.unsqueeze(1);
-    let q = (&to_now * &normals).sum_dim_intlist(3, false, Kind::Float);
-    let near = (g1.unsqueeze(2) - h.before.seeds.unsqueeze(1))
-        .square()
-        .sum_dim_intlist(3, false, Kind::Float);
+/// `a_ij · ReLU(−q_ij)` `[B, V, N]` with `q_ij = (g_{t−1,i} − b_{t,j}) · n_{t,j}` (previous
+/// garment against the current seeds' tangent planes) and `a_ij = exp(−|g_{t−1,i} − b_{t−1,j}|²
+/// / 2σ²)` (only seeds that were near the vertex push it): the size of the force along `n_j`.
+/// Dot products as matrix products, so that no `[B, V, N, 3]` tensor is built.
+fn contact_sizes(g1: &Tensor, h: &History, sigma: f32) -> Tensor {
+    let (seeds_now, normals) = (&h.now.seeds, &h.now.normals);
+    let plane = (seeds_now * normals)
+        .sum_dim_intlist(2, false, Kind::Float)
+        .unsqueeze(1);
+    let q = g1.bmm(&normals.transpose(1, 2)) - plane;
+    let before = &h.before.seeds;
+    let square = |x: &Tensor| x.square().sum_dim_intlist(2, false, Kind::Float);
+    let near = (square(g1).unsqueeze(2) + square(before).unsqueeze(1)
+        - g1.bmm(&before.transpose(1, 2)) * 2.0)
+        .clamp_min(0.0);
     let a = (-near / (2.0 * (sigma as f64).powi(2))).exp();
-    ((a * (-q).relu() * FORCE_SCALE).unsqueeze(3)) * normals
+    a * (-q).relu() * FORCE_SCALE
 }
 
 /// `C` and the residual `E_dyn`.
@@ -252,12 +266,16 @@ impl MotionEncoder {
 
     /// `E_t = C(M^{V,V̇}_{t−1}, C_t)` `[B, F, H, W]`.
     pub fn dynamic_features(&self, space: &Space, x: &MotionInputs) -> Tensor {
-        let per_vertex = x.motion.matmul(&self.c0_motion.tr())
-            + Tensor::einsum(
-                "bvnk,cnk->bvc",
-                &[x.forces.shallow_clone(), self.c0_forces.shallow_clone()],
-                None::<i64>,
-            );
+        // Σ_jk W_cjk s_ij n_jk = Σ_j s_ij U_jc with U_jc = Σ_k W_cjk n_jk.
+        let per_seed = Tensor::einsum(
+            "bnk,cnk->bnc",
+            &[
+                x.contact_normals.shallow_clone(),
+                self.c0_forces.shallow_clone(),
+            ],
+            None::<i64>,
+        );
+        let per_vertex = x.motion.matmul(&self.c0_motion.tr()) + x.contact.bmm(&per_seed);
         let map = space.scatter(&per_vertex);
         let f = self.shape.features as i64;
         let first = map
@@ -328,5 +346,79 @@ impl MotionEncoder {
     /// Copies stored values into the parameters (shapes must match).
     pub fn load_parameters(&mut self, stored: &[(String, Tensor)]) -> anyhow::Result<()> {
         super::space::load_variables(&mut self.vs, stored)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::models::dynamic::space::tests::small_space;
+    use tch::Device;
+
+    fn random(shape: &[i64]) -> Tensor {
+        Tensor::randn(shape, (Kind::Float, Device::Cpu)) * 0.2
+    }
+
+    fn frames(bs: i64, n: i64) -> BodyFrames {
+        BodyFrames {
+            seeds: random(&[bs, n, 3]),
+            transforms: random(&[bs, n, 12]),
+            normals: random(&[bs, n, 3]),
+            root: random(&[bs, 3, 3]),
+        }
+    }
+
+    #[test]
+    fn factored_contact_equals_the_dense_interaction_forces_through_the_first_layer() {
+        let (space, mesh) = small_space();
+        let (bs, v, n) = (2, mesh.vertex_count() as i64, 3);
+        tch::manual_seed(5);
+        let h = History {
+            garment: [
+                random(&[bs, v, 3]),
+                random(&[bs, v, 3]),
+                random(&[bs, v, 3]),
+            ],
+            before: frames(bs, n),
+            now: frames(bs, n),
+            fps: 30.0,
+        };
+        let sigma = 0.2;
+        let encoder = MotionEncoder::new(MotionShape::for_space(&[4, 4], 4), &space, Device::Cpu);
+        let x = motion_inputs(&space, &h, sigma, None);
+        // The paper's forces, built in full: a_ij · ReLU(−q_ij) · n_j, in the root frame.
+        let g1 = &h.garment[0];
+        let q = ((g1.unsqueeze(2) - h.now.seeds.unsqueeze(1)) * h.now.normals.unsqueeze(1))
+            .sum_dim_intlist(3, false, Kind::Float);
+        let a = ((g1.unsqueeze(2) - h.before.seeds.unsqueeze(1))
+            .square()
+            .sum_dim_intlist(3, false, Kind::Float)
+            / (-2.0 * (sigma as f64).powi(2)))
+        .exp();
+        let forces = ((a * (-q).relu() * FORCE_SCALE).unsqueeze(3) * h.now.normals.unsqueeze(1))
+            .reshape([bs, -1, 3])
+            .bmm(&h.now.root)
+            .reshape([bs, v, n, 3]);
+        let dense = Tensor::einsum(
+            "bvnk,cnk->bvc",
+            &[forces, encoder.c0_forces.shallow_clone()],
+            None::<i64>,
+        );
+        let per_seed = Tensor::einsum(
+            "bnk,cnk->bnc",
+            &[
+                x.contact_normals.shallow_clone(),
+                encoder.c0_forces.shallow_clone(),
+            ],
+            None::<i64>,
+        );
+        let factored = x.contact.bmm(&per_seed);
+        let scale = dense.abs().max().double_value(&[]);
+        assert!(scale > 1e-3, "the test's garment must touch the seeds");
+        let error = (dense - factored).abs().max().double_value(&[]);
+        assert!(
+            error < 1e-5 * scale,
+            "factored {error} vs dense scale {scale}"
+        );
     }
 }

@@ -391,9 +391,17 @@ impl Space {
     /// `Z [B, L]` of garments `g` with seeds at `b` and seed transforms `m`:
     /// `E_sta(S(M^P))` plus the linear path's projection of the unskinned displacements.
     pub fn encode(&self, g: &Tensor, b: &Tensor, m: &Tensor) -> Tensor {
+        self.encode_keeping_features(g, b, m).1
+    }
+
+    /// [`Space::encode`] that also returns the `S(M^P)` it went through (the dynamic stage's
+    /// input), so that callers needing both pay for `S` once.
+    pub fn encode_keeping_features(&self, g: &Tensor, b: &Tensor, m: &Tensor) -> (Tensor, Tensor) {
         let linear =
             (self.rest_displacements(g, m) - &self.linear_mean).matmul(&self.linear_encode.tr());
-        self.encode_features(&self.static_features(g, b)) + linear
+        let features = self.static_features(g, b);
+        let z = self.encode_features(&features) + linear;
+        (features, z)
     }
 
     /// Garments `g [B, V, 3]` unskinned by seed transforms `m` (each vertex's blended transform
@@ -580,12 +588,13 @@ pub fn load_variables(vs: &mut nn::VarStore, stored: &[(String, Tensor)]) -> Res
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::geometry::test_meshes::grid;
     use crate::geometry::FaceVaryingUv;
 
-    fn small_space() -> (Space, TriMesh) {
+    /// A 3-seed space on an 8² map over a small grid garment.
+    pub(crate) fn small_space() -> (Space, TriMesh) {
         let mut mesh = grid(3, 3, 0.1);
         let uv: Vec<[f32; 2]> = mesh
             .positions
