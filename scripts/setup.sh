@@ -6,12 +6,15 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 log() { printf '[setup] %s\n' "$*" >&2; }
 
-# 1. Debian packages for the independent client checks (Blender imports our files).
+# 1. Debian packages for the independent client checks (Blender imports our files, Chromium
+#    plays our pages).
 need_apt=()
 command -v blender >/dev/null 2>&1 || need_apt+=(blender)
 python3 -c 'import numpy' >/dev/null 2>&1 || dpkg -s python3-numpy >/dev/null 2>&1 || need_apt+=(python3-numpy)
 command -v node >/dev/null 2>&1 || need_apt+=(nodejs npm)
 command -v cc >/dev/null 2>&1 || need_apt+=(build-essential)
+# Headless Chromium (SwiftShader WebGL, no GPU) opens the pages `garmentbake view` writes.
+command -v chromium >/dev/null 2>&1 || need_apt+=(chromium)
 if [ ${#need_apt[@]} -gt 0 ]; then
   log "apt-get install ${need_apt[*]}"
   export DEBIAN_FRONTEND=noninteractive

@@ -334,9 +334,7 @@ fn add_mesh(b: &mut Builder, mesh: &Mesh) -> json::Index<json::Mesh> {
     let names: Vec<_> = mesh.blend_shapes.iter().map(|s| s.name.clone()).collect();
     b.root.push(json::Mesh {
         extensions: None,
-        extras: (!names.is_empty())
-            .then(|| extras(serde_json::json!({ "targetNames": names })))
-            .flatten(),
+        extras: mesh_extras(mesh, &names),
         name: Some(mesh.name.clone()),
         primitives: vec![json::mesh::Primitive {
             attributes,
@@ -349,6 +347,27 @@ fn add_mesh(b: &mut Builder, mesh: &Mesh) -> json::Index<json::Mesh> {
         }],
         weights: (!names.is_empty()).then(|| vec![0.0; names.len()]),
     })
+}
+
+/// The mesh's extras: blend-shape names (three.js, Blender read `targetNames`) and, when the
+/// vertices were split at UV seams, `sourceVertex`: each vertex's index in the source mesh, the
+/// order point caches of the same garment keep (`garmentbake view` plays them on this mesh).
+fn mesh_extras(mesh: &Mesh, names: &[String]) -> json::Extras {
+    let mut map = serde_json::Map::new();
+    if !names.is_empty() {
+        map.insert("targetNames".into(), serde_json::json!(names));
+    }
+    let identity = mesh
+        .source_vertex
+        .iter()
+        .enumerate()
+        .all(|(i, &s)| i == s as usize);
+    if !identity {
+        map.insert("sourceVertex".into(), serde_json::json!(mesh.source_vertex));
+    }
+    (!map.is_empty())
+        .then(|| extras(serde_json::Value::Object(map)))
+        .flatten()
 }
 
 /// JOINTS_n / WEIGHTS_n sets of 4; empty slots point at joint 0 with weight 0.

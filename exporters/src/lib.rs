@@ -11,6 +11,7 @@ pub mod mdd;
 pub mod pc2;
 #[cfg(feature = "usd")]
 pub mod usd;
+pub mod viewer;
 
 pub use asset::{BakedAsset, PointCache};
 use std::path::Path;

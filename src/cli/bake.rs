@@ -44,6 +44,9 @@ pub struct Args {
     /// when it fails.
     #[arg(long)]
     pub validate: bool,
+    /// Also write a page that plays the bake in a browser (as `garmentbake view FILE.glb --out`).
+    #[arg(long, value_name = "PAGE.html")]
+    pub view: Option<PathBuf>,
     #[command(flatten)]
     pub compute: ComputeArgs,
     #[command(flatten)]
@@ -58,6 +61,8 @@ pub struct Report {
     pub report: BakeReport,
     /// With --validate: one check per clip (glTF) or one for the file (USD).
     pub validation: Option<Vec<Validation>>,
+    /// With --view: the page and its size in bytes.
+    pub view: Option<(PathBuf, u64)>,
 }
 
 /// `validate` on the written file.
@@ -108,6 +113,9 @@ impl Execute for Args {
     type Report = Report;
 
     fn execute(&self, _say: &dyn Fn(&str)) -> Result<Report> {
+        if let Some(page) = &self.view {
+            super::view::check_page_path(page)?;
+        }
         let (model, device) = self.compute.load_model(&self.model)?;
         let maps = read_maps(&self.clips.maps)?;
         let clips = self
@@ -135,11 +143,27 @@ impl Execute for Args {
             .validate
             .then(|| self.check_written(&model, &clips, device))
             .transpose()?;
+        let view = match &self.view {
+            Some(page) => {
+                // A USD bake gets its page from the same asset as glTF.
+                let glb = match exporters::FileKind::of(&self.out) {
+                    Some(exporters::FileKind::Gltf) if is_glb(&self.out) => {
+                        std::fs::read(&self.out)
+                            .with_context(|| format!("cannot read {}", self.out.display()))?
+                    }
+                    _ => exporters::gltf::to_glb(&asset),
+                };
+                let title = self.out.file_name().unwrap_or_default().to_string_lossy();
+                Some((page.clone(), super::view::glb_page(page, &glb, &title)?))
+            }
+            None => None,
+        };
         Ok(Report {
             out: self.out.clone(),
             bytes: std::fs::metadata(&self.out).map(|m| m.len()).unwrap_or(0),
             report,
             validation,
+            view,
         })
     }
 
@@ -162,6 +186,9 @@ impl Execute for Args {
             );
         }
         println!("wrote {} ({:.1} MB)", r.out.display(), r.bytes as f64 / 1e6);
+        if let Some((page, bytes)) = &r.view {
+            println!("wrote {} ({:.1} MB)", page.display(), *bytes as f64 / 1e6);
+        }
         for v in r.validation.iter().flatten() {
             let clip = v.clip.as_deref().unwrap_or("structure");
             let verdict = if v.passed { "passes" } else { "FAILS" };
@@ -182,4 +209,9 @@ impl Execute for Args {
         let failed = r.validation.iter().flatten().any(|v| !v.passed);
         i32::from(failed)
     }
+}
+
+fn is_glb(path: &std::path::Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("glb"))
 }

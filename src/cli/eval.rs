@@ -38,6 +38,9 @@ pub struct Args {
     /// Also write the posed body as a point cache (same formats).
     #[arg(long)]
     pub body_out: Option<PathBuf>,
+    /// Also write a page that plays the garment cache on the body in a browser (see `view`).
+    #[arg(long, value_name = "PAGE.html")]
+    pub view: Option<PathBuf>,
     #[command(flatten)]
     pub compute: ComputeArgs,
     #[command(flatten)]
@@ -61,6 +64,8 @@ pub struct Report {
     pub body_overlap_vertices: OverlapSummary,
     pub pc2: PathBuf,
     pub body_out: Option<PathBuf>,
+    /// With --view: the page and its size in bytes.
+    pub view: Option<(PathBuf, u64)>,
 }
 
 #[derive(Serialize)]
@@ -88,6 +93,9 @@ impl Execute for Args {
     type Report = Report;
 
     fn execute(&self, _say: &dyn Fn(&str)) -> Result<Report> {
+        if let Some(page) = &self.view {
+            super::view::check_page_path(page)?;
+        }
         let (model, device) = self.compute.load_model(&self.model)?;
         let network = model.pbns()?;
         let body = match &self.body {
@@ -119,6 +127,19 @@ impl Execute for Args {
                 .collect();
             write_cache(path, &body.mesh, &frames, anim.fps)?;
         }
+        let view = match &self.view {
+            Some(page) => {
+                let bytes = super::view::cache_page(
+                    page,
+                    (&body, &model.garment),
+                    (&anim.name, anim.fps, &poses),
+                    ("network", &garment),
+                    None,
+                )?;
+                Some((page.clone(), bytes))
+            }
+            None => None,
+        };
         let m = &comparison.metrics;
         Ok(Report {
             model: self
@@ -146,6 +167,7 @@ impl Execute for Args {
             body_overlap_vertices: OverlapSummary::of(&comparison.body_overlap),
             pc2: self.out.clone(),
             body_out: self.body_out.clone(),
+            view,
         })
     }
 
@@ -185,6 +207,9 @@ impl Execute for Args {
             o.median, o.most, o.worst_frame
         );
         println!("wrote {}", r.pc2.display());
+        if let Some((page, bytes)) = &r.view {
+            println!("wrote {} ({:.1} MB)", page.display(), *bytes as f64 / 1e6);
+        }
     }
 }
 

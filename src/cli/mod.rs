@@ -12,6 +12,7 @@ pub mod simulate;
 pub mod train;
 pub mod train_dynamic;
 pub mod validate;
+pub mod view;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -74,6 +75,7 @@ enum Command {
     Rollout(rollout::Args),
     Bench(bench::Args),
     Validate(validate::Args),
+    View(view::Args),
 }
 
 /// Runs the CLI; errors are one line on stderr and exit code 2 (1 is left for failed checks).
@@ -91,6 +93,7 @@ pub fn main() -> i32 {
         Command::Rollout(a) => run(&a, a.output.json),
         Command::Bench(a) => run(&a, a.json()),
         Command::Validate(a) => run(&a, a.output.json),
+        Command::View(a) => run(&a, a.output.json),
     };
     match result {
         Ok(code) => code,

@@ -13,3 +13,4 @@ mod retarget;
 mod simulate;
 mod usd;
 mod validate;
+mod view;
