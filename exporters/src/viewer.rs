@@ -79,6 +79,8 @@ struct Data<'a> {
     fps: Option<f32>,
     tracks: Vec<TrackData<'a>>,
     reference: Option<TrackData<'a>>,
+    /// The reference is this track (inlined once).
+    reference_track: Option<usize>,
     error_scale_mm: f32,
 }
 
@@ -121,6 +123,12 @@ pub fn html(page: &Page) -> Result<String, ViewerError> {
     if MODULES.iter().any(|(_, src)| src.is_empty()) {
         return Err(ViewerError::NoThree);
     }
+    // A reference that is also a track (e.g. bake vs the network's cache) is inlined once.
+    let reference_track = page.reference.as_ref().and_then(|r| {
+        page.tracks
+            .iter()
+            .position(|t| t.point_count == r.point_count && t.points == r.points)
+    });
     let data = Data {
         title: &page.title,
         glb: base64::encode(page.glb),
@@ -129,7 +137,12 @@ pub fn html(page: &Page) -> Result<String, ViewerError> {
         vertex_map: page.vertex_map.as_deref(),
         fps: page.fps,
         tracks: page.tracks.iter().map(TrackData::from).collect(),
-        reference: page.reference.as_ref().map(TrackData::from),
+        reference: page
+            .reference
+            .as_ref()
+            .filter(|_| reference_track.is_none())
+            .map(TrackData::from),
+        reference_track,
         error_scale_mm: page.error_scale_mm,
     };
     let modules: Vec<(&str, String)> = MODULES

@@ -150,8 +150,13 @@ function addTracks() {
 		$('bake').addEventListener('change', draw);
 	}
 	$('layout-row').hidden = tracks.length === 0 || !data.garmentIsBake;
-	if (data.reference) {
+	if (data.referenceTrack !== null) {
+		const t = tracks[data.referenceTrack];
+		reference = { points: t.points, frames: t.frames, data: t.data };
+	} else if (data.reference) {
 		reference = { ...data.reference, data: floats(data.reference.data) };
+	}
+	if (reference) {
 		$('error-row').hidden = false;
 		$('legend').hidden = false;
 		$('legend-max').textContent = `${data.errorScaleMm} mm`;
@@ -464,6 +469,7 @@ function applyParams() {
 	$('error').checked = flag('error', true);
 	$('spin').checked = flag('spin', false);
 	if (params.get('layout') === 'side') $('layout').value = 'side';
+	if ($('bake')) $('bake').checked = flag('bake', true);
 	state.playing = flag('play', false);
 	$('play').textContent = state.playing ? 'pause' : 'play';
 	document.body.classList.toggle('bare', !flag('ui', true));

@@ -207,11 +207,33 @@ fn caches_play_on_the_garment_and_error_colours_measure_their_distance() {
     assert_eq!(report["bytes"], std::fs::metadata(&page).unwrap().len());
     // The bake replays the network to a micrometre, the cache is the network: both are 5 mm from
     // the shifted reference at every vertex, if the cache maps onto the seam-split glTF vertices.
-    let dom = dom(&page, "clip=131_02&frame=7");
-    let legend = &dom[dom.find("id=\"legend-now\"").expect("legend")..];
+    let shown = dom(&page, "clip=131_02&frame=7");
+    let legend = &shown[shown.find("id=\"legend-now\"").expect("legend")..];
     let legend = &legend[..legend.find("</div>").unwrap()];
     assert!(legend.contains("max this frame 5.00 mm"), "{legend}");
-    assert!(dom.contains("network</label>"), "the cache is listed");
+    // A reference that is also a --with cache is inlined once.
+    let once = dir.join("once.html");
+    let net_arg = net.to_str().unwrap();
+    let report = garmentbake_json(&[
+        "view",
+        glb.to_str().unwrap(),
+        "--with",
+        net_arg,
+        "--error-vs",
+        net_arg,
+        "--out",
+        once.to_str().unwrap(),
+        "--json",
+    ]);
+    let cache_b64 = 20 * 2808 * 12 * 4 / 3;
+    let size = report["bytes"].as_u64().unwrap() as usize;
+    assert!(size < std::fs::metadata(&page).unwrap().len() as usize - cache_b64 / 2);
+    let dom = dom(&once, "clip=131_02&frame=7");
+    assert!(
+        dom.contains("max this frame 0.00 mm"),
+        "the bake replays the network"
+    );
+    assert!(shown.contains("network</label>"), "the cache is listed");
 }
 
 #[test]
@@ -245,6 +267,7 @@ fn a_cache_of_another_mesh_is_one_error_line() {
     let (glb, _) = baked(&dir);
     // A real cache, of the body: not the garment's vertex count.
     let body_cache = dir.join("body.pc2");
+    let eval_page = dir.join("eval.html");
     garmentbake_ok(&[
         "eval",
         "--model",
@@ -259,7 +282,17 @@ fn a_cache_of_another_mesh_is_one_error_line() {
         dir.join("garment.pc2").to_str().unwrap(),
         "--body-out",
         body_cache.to_str().unwrap(),
+        "--view",
+        eval_page.to_str().unwrap(),
     ]);
+    // eval --view: the network's cache on the body posed by the clip.
+    let dom = dom(&eval_page, "frame=3");
+    assert!(
+        dom.contains("data-ready=\"1\""),
+        "the eval page did not finish"
+    );
+    assert_eq!(clip_options(&dom), ["131_02"]);
+    assert!(dom.contains("network</label>"), "the cache is listed");
     let page = dir.join("bad.html");
     let out = garmentbake(&[
         "view",
