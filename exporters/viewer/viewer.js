@@ -35,14 +35,19 @@ function say(text) {
 }
 
 // ------------------------------------------------------------------ scene
+// Colours and shading straight in display values, as the preview computes them (no sRGB decode
+// and re-encode, which would flatten the shading).
+THREE.ColorManagement.enabled = false;
 const renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
+renderer.outputColorSpace = THREE.LinearSRGBColorSpace;
 renderer.setPixelRatio(window.devicePixelRatio);
 $('stage').appendChild(renderer.domElement);
 const scene = new THREE.Scene();
 scene.background = srgb(BACKGROUND);
-// Ambient + a headlight, like the preview's shading (three's lights carry a factor of pi).
-scene.add(new THREE.AmbientLight(0xffffff, 0.35 * Math.PI));
-const headlight = new THREE.DirectionalLight(0xffffff, 0.65 * Math.PI);
+// Ambient + a headlight, the preview's shading: src/preview/raster.rs AMBIENT, DIFFUSE (three's
+// lights carry a factor of pi).
+scene.add(new THREE.AmbientLight(0xffffff, 0.28 * Math.PI));
+const headlight = new THREE.DirectionalLight(0xffffff, 0.72 * Math.PI);
 scene.add(headlight, headlight.target);
 const ortho = new THREE.OrthographicCamera(-1, 1, 1, -1, 0.01, 1000);
 const perspective = new THREE.PerspectiveCamera(30, 1, 0.01, 1000);
@@ -149,7 +154,8 @@ function addTracks() {
 		$('tracks').prepend(label);
 		$('bake').addEventListener('change', draw);
 	}
-	$('layout-row').hidden = tracks.length === 0 || !data.garmentIsBake;
+	// Side by side needs two garments: the bake and a cache, or two caches.
+	$('layout-row').hidden = tracks.length + (data.garmentIsBake ? 1 : 0) < 2;
 	if (data.referenceTrack !== null) {
 		const t = tracks[data.referenceTrack];
 		reference = { points: t.points, frames: t.frames, data: t.data };
@@ -203,9 +209,10 @@ function pose() {
 	scene.updateMatrixWorld(true);
 	const showBake = data.garmentIsBake && (!$('bake') || $('bake').checked);
 	garment.visible = showBake;
-	const side = $('layout').value === 'side' && showBake;
-	const spacing = side ? sideSpacing() : 0;
-	let slot = 1;
+	const spacing = $('layout').value === 'side' ? sideSpacing() : 0;
+	// The bake (with the body) stands at 0, the caches to its right; without a bake, the first
+	// cache stands on the body.
+	let slot = showBake ? 1 : 0;
 	for (const t of tracks) {
 		t.mesh.visible = t.checkbox.checked;
 		if (!t.mesh.visible) continue;
