@@ -23,6 +23,8 @@ fn chromium(page: &Path, hash: &str, args: &[&str]) -> std::process::Output {
                 "--headless",
                 "--no-sandbox",
                 "--disable-gpu",
+                // Containers (CI) often have a small /dev/shm.
+                "--disable-dev-shm-usage",
                 "--use-gl=swiftshader",
                 "--enable-unsafe-swiftshader",
                 "--hide-scrollbars",
