@@ -2,6 +2,7 @@
 
 pub mod compress;
 pub mod pbns;
+pub mod sequence;
 
 use crate::geometry::mesh::TriMesh;
 use crate::geometry::normals::vertex_normals;

@@ -2,12 +2,17 @@
 
 use super::args::{write_cache, ComputeArgs, OutputArgs};
 use super::Execute;
+use crate::bake::sequence::{bake_sequence, SequenceReport};
+use crate::geometry::PointIndex;
 use crate::io::point_cache::read_pc2;
 use crate::models::dynamic::Seeds;
 use crate::motion::{chain, load_clip, read_maps};
+use crate::rig::weights::smooth_garment_skin;
+use crate::rig::SkelAnimation;
 use crate::rollout::{roll_out, FrameTiming, Init, Settings};
 use crate::simulate::stats::{self, Series, Summary};
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
+use exporters::FileKind;
 use serde::Serialize;
 use std::path::PathBuf;
 
@@ -45,9 +50,16 @@ pub struct Args {
     /// Frames over which a later clip blends in from the previous clip's last pose.
     #[arg(long, default_value_t = 15)]
     pub fade: usize,
-    /// Output point cache (.pc2, .usda/.usdc/.usd).
+    /// Output: a point cache (.pc2, .mdd, .usda/.usdc: time-sampled points), or a compressed
+    /// glTF (.glb/.gltf: the garment skinned to the body's skeleton plus blend shapes from the
+    /// singular directions of its un-skinned residual over the roll-out, their weights animated;
+    /// plays in any glTF viewer).
     #[arg(long)]
     pub out: PathBuf,
+    /// glTF output: keep the fewest blend shapes whose replay stays within this distance (mm) of
+    /// every rolled-out vertex.
+    #[arg(long, default_value_t = 1.0)]
+    pub tolerance_mm: f32,
     /// Also write the posed body per frame as a point cache.
     #[arg(long)]
     pub body_out: Option<PathBuf>,
@@ -108,6 +120,9 @@ pub struct Report {
     pub summary: Summary,
     pub reference: Option<Versus>,
     pub out: PathBuf,
+    pub out_bytes: u64,
+    /// For a glTF output: blend shapes kept and the replay error.
+    pub baked: Option<SequenceReport>,
     pub body_out: Option<PathBuf>,
 }
 
@@ -115,6 +130,18 @@ impl Execute for Args {
     type Report = Report;
 
     fn execute(&self, say: &dyn Fn(&str)) -> Result<Report> {
+        let kind = FileKind::written(&self.out);
+        if !matches!(
+            kind,
+            Some(FileKind::Pc2 | FileKind::Mdd | FileKind::Usd | FileKind::Gltf)
+        ) {
+            let kinds = [FileKind::Pc2, FileKind::Mdd, FileKind::Usd, FileKind::Gltf];
+            bail!(
+                "{}: the roll-out is written as {}",
+                self.out.display(),
+                FileKind::extension_list(&kinds, true)
+            );
+        }
         let (file, _device) = self.compute.load_model(&self.model)?;
         let dynamic = file.dynamic()?;
         dynamic.motion()?;
@@ -198,7 +225,12 @@ impl Execute for Args {
             &[],
             None,
         );
-        write_cache(&self.out, &file.garment, &rollout.frames, fps)?;
+        let baked = if kind == Some(FileKind::Gltf) {
+            Some(self.write_gltf(&file, &poses, &rollout.frames, fps, say)?)
+        } else {
+            write_cache(&self.out, &file.garment, &rollout.frames, fps)?;
+            None
+        };
         if let Some(path) = &self.body_out {
             let bodies: Vec<Vec<[f32; 3]>> = poses
                 .iter()
@@ -222,6 +254,8 @@ impl Execute for Args {
             summary,
             reference: reference.map(|r| versus(&rollout.frames, &r)),
             out: self.out.clone(),
+            out_bytes: std::fs::metadata(&self.out).map_or(0, |m| m.len()),
+            baked,
             body_out: self.body_out.clone(),
         })
     }
@@ -254,10 +288,63 @@ impl Execute for Args {
                 v.one_step_mm, v.first_50_mm, v.clip_mm, v.max_mm, v.worst_frame
             );
         }
-        println!("wrote {}", r.out.display());
+        if let Some(b) = &r.baked {
+            println!(
+                "glTF: {} blend shapes (residual rank {}) within {:.3} mm of the roll-out (mean {:.4} mm)",
+                b.targets,
+                b.rank,
+                b.max_error_m * 1e3,
+                b.mean_error_m * 1e3
+            );
+        }
+        println!(
+            "wrote {} ({} bytes, {:.0} per frame)",
+            r.out.display(),
+            r.out_bytes,
+            r.out_bytes as f64 / r.frames.max(1) as f64
+        );
         if let Some(b) = &r.body_out {
             println!("wrote {}", b.display());
         }
+    }
+}
+
+impl Args {
+    /// The roll-out as a skinned, blend-shaped glTF (see `bake::sequence`), on the body's
+    /// skeleton with the same fixed skin as the model's LBS baseline.
+    fn write_gltf(
+        &self,
+        file: &crate::models::file::ModelFile,
+        poses: &[Vec<crate::rig::JointTransform>],
+        frames: &[Vec<[f32; 3]>],
+        fps: f32,
+        say: &dyn Fn(&str),
+    ) -> Result<SequenceReport> {
+        let body = &file.body;
+        let index = PointIndex::new(&body.mesh.positions)?;
+        let skin = smooth_garment_skin(
+            &file.garment,
+            &body.skin,
+            body.skeleton.joint_count(),
+            &index,
+        );
+        let animation = SkelAnimation::from_poses("rollout", fps, poses);
+        say("compressing the roll-out into blend shapes");
+        let (mut asset, report) = bake_sequence(
+            &body.skeleton,
+            &file.garment,
+            &skin,
+            &animation,
+            frames,
+            self.tolerance_mm * 1e-3,
+        )?;
+        asset.provenance = vec![
+            ("generator".into(), "garmentbake rollout".into()),
+            ("model".into(), self.model.display().to_string()),
+        ];
+        exporters::write(&asset, &self.out)
+            .with_context(|| format!("writing {}", self.out.display()))?;
+        Ok(report)
     }
 }
 

@@ -13,6 +13,22 @@ pub struct SkelAnimation {
 }
 
 impl SkelAnimation {
+    /// A clip from local poses per frame (e.g. several clips chained for one roll-out).
+    pub fn from_poses(name: &str, fps: f32, poses: &[Vec<JointTransform>]) -> SkelAnimation {
+        SkelAnimation {
+            name: name.into(),
+            fps,
+            translations: poses
+                .iter()
+                .map(|p| p.iter().map(|j| j.translation).collect())
+                .collect(),
+            rotations: poses
+                .iter()
+                .map(|p| p.iter().map(|j| j.rotation).collect())
+                .collect(),
+        }
+    }
+
     pub fn frame_count(&self) -> usize {
         self.rotations.len()
     }

@@ -180,6 +180,18 @@ pub fn garment_skin(
     (Skin::from_dense(&dense, influences), inpainted)
 }
 
+/// The fixed skin a garment gets when no model learnt one (the dynamic model's LBS baseline and
+/// its baked files): proximity to the 8 nearest body vertices, inpainted beyond 2 cm from the
+/// body, 4 influences (what every glTF viewer plays).
+pub fn smooth_garment_skin(
+    mesh: &TriMesh,
+    surface: &Skin,
+    joints: usize,
+    index: &PointIndex,
+) -> Skin {
+    garment_skin(mesh, surface, joints, index, 8, 4, Some(0.02)).0
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

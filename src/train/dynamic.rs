@@ -302,14 +302,11 @@ impl SpaceTrainer {
         let ops = MeshOps::new(&garment.mesh, device);
         let sdf = Sdf::new(&body, &garment.mesh, device);
         let index = crate::geometry::PointIndex::new(&body.mesh.positions)?;
-        let (lbs, _) = weights::garment_skin(
+        let lbs = weights::smooth_garment_skin(
             &garment.mesh,
             &body.skin,
             body.skeleton.joint_count(),
             &index,
-            8,
-            4,
-            Some(0.02),
         );
         let params = space.parameters();
         let adam = Adam::new(

@@ -102,25 +102,8 @@ pub fn bake(dir: &Path, name: &str, extra: &[&str]) -> PathBuf {
 
 /// three.js replay of every frame against the reference cache: max error in metres.
 fn threejs_max_error(glb: &Path, dir: &Path, frames: usize) -> f64 {
-    let times: Vec<String> = (0..frames)
-        .map(|f| format!("{:.9}", f as f64 / 30.0))
-        .collect();
-    let json = glb.with_extension("three.json");
-    run_ok(
-        std::process::Command::new("node")
-            .arg(root().join("tools/node/skin_eval.mjs"))
-            .arg(glb)
-            .args(["--times", &times.join(","), "--mesh", "garment", "--pc2"])
-            .arg(dir.join("ref.pc2"))
-            .arg("--pc2-map")
-            .arg(dir.join("map.json"))
-            .arg("--out")
-            .arg(&json),
-    );
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(json).unwrap()).unwrap();
-    assert_eq!(v["meshes"][0]["frames"].as_array().unwrap().len(), frames);
-    v["meshes"][0]["max_error"].as_f64().unwrap()
+    let times: Vec<f64> = (0..frames).map(|f| f as f64 / 30.0).collect();
+    threejs_cache_error(glb, &times, &dir.join("ref.pc2"), &dir.join("map.json"))
 }
 
 const FRAMES_131_02_AT_30: usize = 312;

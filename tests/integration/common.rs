@@ -90,6 +90,32 @@ pub fn threejs_positions(file: &Path, times: &[f32], animation: usize) -> serde_
     serde_json::from_str(&std::fs::read_to_string(&json).expect("three.js result")).expect("JSON")
 }
 
+/// three.js's replay of the mesh named "garment" in `file` at `times` against a point cache, the
+/// file's vertices mapped to the cache's by `map` (a JSON list, the bake's `source_vertex`):
+/// the max error over every time and vertex, in metres.
+pub fn threejs_cache_error(file: &Path, times: &[f64], pc2: &Path, map: &Path) -> f64 {
+    let times: Vec<String> = times.iter().map(|t| format!("{t:.9}")).collect();
+    let json = file.with_extension("three.json");
+    run_ok(
+        Command::new("node")
+            .arg(root().join("tools/node/skin_eval.mjs"))
+            .arg(file)
+            .args(["--times", &times.join(","), "--mesh", "garment", "--pc2"])
+            .arg(pc2)
+            .arg("--pc2-map")
+            .arg(map)
+            .arg("--out")
+            .arg(&json),
+    );
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(json).unwrap()).unwrap();
+    assert_eq!(
+        v["meshes"][0]["frames"].as_array().unwrap().len(),
+        times.len()
+    );
+    v["meshes"][0]["max_error"].as_f64().unwrap()
+}
+
 /// Blender's own glTF importer, evaluated at scene `frames` with the scene at `fps`.
 pub fn blender_positions(file: &Path, frames: &[usize], fps: f32) -> serde_json::Value {
     let json = file.with_extension("blender.json");

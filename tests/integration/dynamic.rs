@@ -288,6 +288,7 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
     assert!(frames[0] == first[0], "frame 0 is the --init garment");
     let v = &plain["reference"];
     assert!(v["one_step_mm"].as_f64().unwrap() < 2.0 * f + 1.0, "{v}");
+    gltf_replays_the_roll_out(&dir, &model, &sim, &out);
     // A wide clearance makes the fix fire on every frame; it must cut the collision loss.
     let fixed = roll_out(
         &model,
@@ -303,6 +304,44 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
     assert!(
         after < 0.5 * before,
         "collision loss {before:.1} → {after:.1} mm"
+    );
+}
+
+/// The same roll-out as a compressed glTF: Khronos-valid, and three.js plays every frame within
+/// the tolerance of the point cache (`roll`, written without the collision fix, deterministic).
+fn gltf_replays_the_roll_out(dir: &Path, model: &Path, sim: &Path, roll: &Path) {
+    let glb = dir.join("roll.glb");
+    let r = roll_out(
+        model,
+        sim,
+        &glb,
+        &["--no-collision-fix", "--tolerance-mm", "0.5"],
+    );
+    let baked = &r["baked"];
+    assert!(baked["max_error_m"].as_f64().unwrap() <= 0.5e-3, "{baked}");
+    let (ok, report) = khronos_validate(&glb);
+    assert!(ok, "{report}");
+    let file = garmentbake::models::file::load(model, tch::Device::Cpu).unwrap();
+    let mesh = garmentbake::bake::skinned_mesh_asset(
+        "garment",
+        &file.garment,
+        None,
+        &garmentbake::rig::Skin::from_dense(&vec![vec![1.0]; file.garment.vertex_count()], 1),
+        [0.0; 3],
+    );
+    let map = dir.join("roll_map.json");
+    std::fs::write(&map, serde_json::to_string(&mesh.source_vertex).unwrap()).unwrap();
+    let times: Vec<f64> = (0..6).map(|f| f as f64 / 30.0).collect();
+    let err = threejs_cache_error(&glb, &times, roll, &map);
+    eprintln!(
+        "roll-out glTF: {} targets, three.js vs the cache: max {:.4} mm",
+        baked["targets"],
+        err * 1e3
+    );
+    assert!(
+        err <= 0.5e-3 + 1e-5,
+        "three.js replay max error {:.4} mm",
+        err * 1e3
     );
 }
 
@@ -350,4 +389,16 @@ fn rollout_refuses_a_space_only_model_and_a_cache_of_another_mesh() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let err = fails(&model, body.to_str().unwrap());
     assert!(err.contains("body.pc2") && err.contains("2808"), "{err}");
+    let wrong = dir.join("never.obj");
+    let o = garmentbake_in_root(&[
+        "rollout",
+        "--model",
+        model.to_str().unwrap(),
+        "--motion",
+        "samples/motions/131_01.bvh",
+        "--out",
+        wrong.to_str().unwrap(),
+    ]);
+    let err = one_error_line(&o, &wrong);
+    assert!(err.contains(".pc2") && err.contains(".glb"), "{err}");
 }
