@@ -9,6 +9,7 @@ use crate::body::{nearest_offsets, Body};
 use crate::geometry::PointIndex;
 use crate::models::dynamic::motion::{motion_inputs, History};
 use crate::models::dynamic::{BodyFrames, Dynamic, MeshLaplacian, Seeds};
+use crate::models::file::ModelFile;
 use crate::rig::JointTransform;
 use anyhow::{bail, Result};
 use serde::Serialize;
@@ -201,6 +202,37 @@ pub fn roll_out(
         progress(t);
     }
     Ok(out)
+}
+
+/// [`roll_out`] of a model file's dynamic model over `poses` at the model's rate, with its seeds
+/// and, unless `settings` says otherwise, its latents held in the training range.
+pub fn for_model(
+    file: &ModelFile,
+    poses: &[Vec<JointTransform>],
+    init: &Init,
+    mut settings: Settings,
+    progress: &mut dyn FnMut(usize),
+) -> Result<Rollout> {
+    let model = file.dynamic()?;
+    let info = file.info.dynamic()?;
+    if settings.latent_range.is_none() {
+        settings.latent_range = info
+            .motion
+            .as_ref()
+            .map(|m| (m.latent_min.clone(), m.latent_max.clone()));
+    }
+    let seeds = Seeds::from_vertices(&file.body, &info.seeds, &info.seed_parts)?;
+    roll_out(
+        model,
+        &file.body,
+        &seeds,
+        &file.garment.triangles,
+        poses,
+        info.fps as f64,
+        init,
+        &settings,
+        progress,
+    )
 }
 
 fn ms(since: Instant) -> f64 {

@@ -5,12 +5,11 @@ use super::Execute;
 use crate::bake::sequence::{bake_sequence, SequenceReport};
 use crate::geometry::PointIndex;
 use crate::io::point_cache::read_pc2;
-use crate::models::dynamic::Seeds;
 use crate::motion::{chain, load_clip, read_maps};
 use crate::rig::weights::smooth_garment_skin;
 use crate::rig::SkelAnimation;
-use crate::rollout::{roll_out, FrameTiming, Init, Settings};
-use crate::simulate::stats::{self, Series, Summary};
+use crate::rollout::{for_model, FrameTiming, Init, Settings};
+use crate::simulate::stats::{self, FrameStats, Series, Summary};
 use anyhow::{bail, Context, Result};
 use exporters::FileKind;
 use serde::Serialize;
@@ -105,6 +104,37 @@ pub struct Timing {
     pub ms_per_collision_iteration: f64,
 }
 
+/// Frames per row of the stability table.
+const WINDOW: usize = 100;
+
+/// Metrics over one span of frames.
+#[derive(Clone, Debug, Serialize)]
+pub struct Window {
+    pub first_frame: usize,
+    pub last_frame: usize,
+    /// Mean share of garment vertices inside the body (winding number), %.
+    pub inside_pct: f64,
+    pub mean_strain_pct: f64,
+    pub max_strain_pct: f64,
+    /// Fastest vertex (m/s).
+    pub max_speed: f64,
+}
+
+impl Window {
+    fn of(frames: &[FrameStats]) -> Window {
+        let n = frames.len().max(1) as f64;
+        let max = |f: fn(&FrameStats) -> f64| frames.iter().map(f).fold(0.0, f64::max);
+        Window {
+            first_frame: frames.first().map_or(0, |f| f.frame),
+            last_frame: frames.last().map_or(0, |f| f.frame),
+            inside_pct: frames.iter().map(|f| f.inside_pct).sum::<f64>() / n,
+            mean_strain_pct: frames.iter().map(|f| f.strain_pct).sum::<f64>() / n,
+            max_strain_pct: max(|f| f.strain_pct),
+            max_speed: max(|f| f.max_speed),
+        }
+    }
+}
+
 #[derive(Serialize)]
 pub struct Report {
     pub motions: Vec<PathBuf>,
@@ -118,6 +148,8 @@ pub struct Report {
     pub timing: Timing,
     /// Our metrics on the written frames (inside the body by winding number, strain, speed).
     pub summary: Summary,
+    /// The same per 100 frames: whether a long roll-out drifts or blows up.
+    pub windows: Vec<Window>,
     pub reference: Option<Versus>,
     pub out: PathBuf,
     pub out_bytes: u64,
@@ -189,30 +221,18 @@ impl Execute for Args {
             collision_fix: !self.no_collision_fix,
             iterations: self.collision_iterations,
             margin: self.collision_margin_mm * 1e-3,
-            latent_range: info
-                .motion
-                .as_ref()
-                .map(|m| (m.latent_min.clone(), m.latent_max.clone())),
             ..Settings::default()
         };
-        let seeds = Seeds::from_vertices(&file.body, &info.seeds, &info.seed_parts)?;
         say(&format!(
             "the model plays at {fps} fps (its training rate): clips are resampled to it"
         ));
         let bar = crate::progress::bar(poses.len() as u64, "roll-out", self.output.json);
-        let rollout = roll_out(
-            dynamic,
-            &file.body,
-            &seeds,
-            &file.garment.triangles,
-            &poses,
-            fps as f64,
-            &init,
-            &settings,
-            &mut |f| bar.set_position(f as u64 + 1),
-        )?;
+        let collision_fix = settings.collision_fix;
+        let rollout = for_model(&file, &poses, &init, settings, &mut |f| {
+            bar.set_position(f as u64 + 1)
+        })?;
         bar.finish_and_clear();
-        let (_, summary) = stats::of(
+        let (per_frame, summary) = stats::of(
             &Series {
                 body: &file.body,
                 rest: &file.garment.positions,
@@ -247,11 +267,12 @@ impl Execute for Args {
             motions: self.motions.clone(),
             fps,
             frames: rollout.frames.len(),
-            collision_fix: settings.collision_fix,
+            collision_fix,
             collision_loss_before_mm: mean_mm(&rollout.collision_before),
             collision_loss_after_mm: mean_mm(&rollout.collision_after),
             timing: timing(&rollout.timings),
             summary,
+            windows: per_frame.chunks(WINDOW).map(Window::of).collect(),
             reference: reference.map(|r| versus(&rollout.frames, &r)),
             out: self.out.clone(),
             out_bytes: std::fs::metadata(&self.out).map_or(0, |m| m.len()),
@@ -282,6 +303,20 @@ impl Execute for Args {
             "inside the body (winding number): {:.3} % of vertices on average, worst frame {} ({} vertices); edge strain mean {:.2} %, worst {:.2} %; fastest vertex {:.2} m/s",
             s.inside.inside_pct, s.inside.worst_frame, s.inside.worst_frame_vertices, s.mean_strain_pct, s.max_strain_pct, s.max_speed
         );
+        if r.windows.len() > 1 {
+            println!("frames      inside %  strain % (mean, worst)  fastest m/s");
+            for w in &r.windows {
+                println!(
+                    "{:>4}-{:<4}  {:>8.3}  {:>7.2} {:>7.2}         {:>6.2}",
+                    w.first_frame,
+                    w.last_frame,
+                    w.inside_pct,
+                    w.mean_strain_pct,
+                    w.max_strain_pct,
+                    w.max_speed
+                );
+            }
+        }
         if let Some(v) = &r.reference {
             println!(
                 "vs reference (vertex L2): after 1 step {:.2} mm, first 50 frames {:.2} mm, whole clip {:.2} mm, max {:.1} mm (frame {})",
@@ -352,7 +387,7 @@ fn mean_mm(per_frame: &[f64]) -> f64 {
     1e3 * per_frame.iter().sum::<f64>() / per_frame.len().max(1) as f64
 }
 
-fn timing(frames: &[FrameTiming]) -> Timing {
+pub(crate) fn timing(frames: &[FrameTiming]) -> Timing {
     // Frame 0 is the start, not a prediction.
     let predicted = &frames[1.min(frames.len())..];
     let n = predicted.len().max(1) as f64;

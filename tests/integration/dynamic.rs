@@ -282,6 +282,8 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
         &["--no-collision-fix", "--reference", sim.to_str().unwrap()],
     );
     assert_eq!(plain["frames"], 6);
+    let windows = plain["windows"].as_array().unwrap();
+    assert_eq!((windows.len(), &windows[0]["last_frame"]), (1, &5.into()));
     let frames = garmentbake::io::point_cache::read_pc2(&out, 2808).unwrap();
     let first = garmentbake::io::point_cache::read_pc2(&sim, 2808).unwrap();
     assert_eq!(frames.len(), 6);
