@@ -65,6 +65,10 @@ pub struct Args {
     /// A simulated cache of the same (single) clip to measure the roll-out against.
     #[arg(long)]
     pub reference: Option<PathBuf>,
+    /// Also write a page that plays the roll-out on the body in a browser (see `view`); with
+    /// --reference, the simulation beside it and error colours against it.
+    #[arg(long, value_name = "PAGE.html")]
+    pub view: Option<PathBuf>,
     /// Skip the per-frame collision fix.
     #[arg(long)]
     pub no_collision_fix: bool,
@@ -156,6 +160,8 @@ pub struct Report {
     /// For a glTF output: blend shapes kept and the replay error.
     pub baked: Option<SequenceReport>,
     pub body_out: Option<PathBuf>,
+    /// With --view: the page and its size in bytes.
+    pub view: Option<(PathBuf, u64)>,
 }
 
 impl Execute for Args {
@@ -173,6 +179,9 @@ impl Execute for Args {
                 self.out.display(),
                 FileKind::extension_list(&kinds, true)
             );
+        }
+        if let Some(page) = &self.view {
+            super::view::check_page_path(page)?;
         }
         let (file, _device) = self.compute.load_model(&self.model)?;
         let dynamic = file.dynamic()?;
@@ -263,6 +272,20 @@ impl Execute for Args {
                 .collect();
             write_cache(path, &file.body.mesh, &bodies, fps)?;
         }
+        let view = match &self.view {
+            Some(page) => {
+                let names: Vec<String> = clips.iter().map(|c| c.name.clone()).collect();
+                let bytes = super::view::cache_page(
+                    page,
+                    (&file.body, &file.garment),
+                    (&names.join(" + "), fps, &poses),
+                    ("roll-out", &rollout.frames),
+                    reference.as_deref().map(|r| ("simulation", r)),
+                )?;
+                Some((page.clone(), bytes))
+            }
+            None => None,
+        };
         Ok(Report {
             motions: self.motions.clone(),
             fps,
@@ -278,6 +301,7 @@ impl Execute for Args {
             out_bytes: std::fs::metadata(&self.out).map_or(0, |m| m.len()),
             baked,
             body_out: self.body_out.clone(),
+            view,
         })
     }
 
@@ -340,6 +364,9 @@ impl Execute for Args {
         );
         if let Some(b) = &r.body_out {
             println!("wrote {}", b.display());
+        }
+        if let Some((page, bytes)) = &r.view {
+            println!("wrote {} ({:.1} MB)", page.display(), *bytes as f64 / 1e6);
         }
     }
 }

@@ -275,15 +275,32 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
     assert!(text.contains("dynamic"), "{text}");
     // The roll-out writes every frame, starting from the simulation's first.
     let out = dir.join("roll.pc2");
+    let page = dir.join("roll.html");
     let plain = roll_out(
         &model,
         &sim,
         &out,
-        &["--no-collision-fix", "--reference", sim.to_str().unwrap()],
+        &[
+            "--no-collision-fix",
+            "--reference",
+            sim.to_str().unwrap(),
+            "--view",
+            page.to_str().unwrap(),
+        ],
     );
     assert_eq!(plain["frames"], 6);
     let windows = plain["windows"].as_array().unwrap();
     assert_eq!((windows.len(), &windows[0]["last_frame"]), (1, &5.into()));
+    // --view: the roll-out and the simulation (the reference, inlined once) in one page.
+    let html = std::fs::read_to_string(&page).unwrap();
+    assert_eq!(plain["view"][1], html.len() as u64);
+    for track in [
+        "\"name\":\"roll-out\"",
+        "\"name\":\"simulation\"",
+        "\"referenceTrack\":1",
+    ] {
+        assert!(html.contains(track), "{track} not in the page");
+    }
     let frames = garmentbake::io::point_cache::read_pc2(&out, 2808).unwrap();
     let first = garmentbake::io::point_cache::read_pc2(&sim, 2808).unwrap();
     assert_eq!(frames.len(), 6);
