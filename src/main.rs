@@ -1,4 +1,8 @@
 fn main() {
+    // A reader that stops early (`garmentbake inspect M | head -1`) ends us quietly, as it ends
+    // any Unix tool, instead of `println!` panicking on the broken pipe.
+    // SAFETY: restoring the default disposition of one signal before any thread starts.
+    unsafe { libc::signal(libc::SIGPIPE, libc::SIG_DFL) };
     let code = garmentbake::cli::main();
     use std::io::Write;
     let _ = std::io::stdout().flush();
