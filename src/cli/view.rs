@@ -352,18 +352,7 @@ pub fn cache_scene(
     fps: f32,
     poses: &[Vec<JointTransform>],
 ) -> Vec<u8> {
-    let anim = SkelAnimation {
-        name: clip.to_string(),
-        fps,
-        translations: poses
-            .iter()
-            .map(|p| p.iter().map(|j| j.translation).collect())
-            .collect(),
-        rotations: poses
-            .iter()
-            .map(|p| p.iter().map(|j| j.rotation).collect())
-            .collect(),
-    };
+    let anim = SkelAnimation::from_poses(clip, fps, poses);
     let garment = exporters::asset::Mesh {
         name: "garment".into(),
         points: garment.positions.clone(),

@@ -373,8 +373,7 @@ fn rollout_refuses_a_space_only_model_and_a_cache_of_another_mesh() {
     let sim = short_sim(&dir);
     let space = dir.join("space.safetensors");
     train(&sim, &space, "0", &[]);
-    let out = dir.join("never.pc2");
-    let fails = |model: &Path, init: &str| {
+    let fails_to = |model: &Path, init: &str, out: &Path| {
         let o = garmentbake_in_root(&[
             "rollout",
             "--model",
@@ -386,8 +385,9 @@ fn rollout_refuses_a_space_only_model_and_a_cache_of_another_mesh() {
             "--out",
             out.to_str().unwrap(),
         ]);
-        one_error_line(&o, &out)
+        one_error_line(&o, out)
     };
+    let fails = |model: &Path, init: &str| fails_to(model, init, &dir.join("never.pc2"));
     let err = fails(&space, "rest");
     assert!(err.contains("only its generative space"), "{err}");
     let (model, _) = motion_model(&dir, &sim, "m.safetensors", "0.1");
@@ -408,16 +408,6 @@ fn rollout_refuses_a_space_only_model_and_a_cache_of_another_mesh() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let err = fails(&model, body.to_str().unwrap());
     assert!(err.contains("body.pc2") && err.contains("2808"), "{err}");
-    let wrong = dir.join("never.obj");
-    let o = garmentbake_in_root(&[
-        "rollout",
-        "--model",
-        model.to_str().unwrap(),
-        "--motion",
-        "samples/motions/131_01.bvh",
-        "--out",
-        wrong.to_str().unwrap(),
-    ]);
-    let err = one_error_line(&o, &wrong);
+    let err = fails_to(&model, "rest", &dir.join("never.obj"));
     assert!(err.contains(".pc2") && err.contains(".glb"), "{err}");
 }
