@@ -4,9 +4,11 @@
 use crate::body::{Body, PosedBody};
 use crate::geometry::SurfaceIndex;
 use crate::metrics::{ClothGeometry, Edges, Inside, InsideFrame, Metrics};
+use crate::models::coverage::{pose_key, Coverage, PoseKey};
 use crate::models::Pbns;
 use crate::rig::{JointTransform, Skeleton, Skin};
 use rayon::prelude::*;
+use serde::Serialize;
 use tch::Device;
 
 /// The model's garment for every pose (world space), in chunks, without gradients.
@@ -103,5 +105,68 @@ pub fn compare(
                 Inside::of(&frames)
             })
             .collect(),
+    }
+}
+
+/// How far each frame of a clip lies from the poses a model was trained on.
+#[derive(Clone, Debug, Serialize)]
+pub struct ClipCoverage {
+    /// Frames at least this far from every training pose are beyond the trained range (radians,
+    /// the balancing threshold; see [`crate::models::coverage`]).
+    pub threshold: f32,
+    /// Per frame, the distance to the nearest training pose (radians).
+    pub distance: Vec<f32>,
+    /// The frames beyond the trained range, in order.
+    pub beyond: Vec<usize>,
+    pub median: f32,
+    pub max: f32,
+}
+
+impl ClipCoverage {
+    /// The coverage of `poses` (local joint transforms per frame) for a model with these feature
+    /// joints.
+    pub fn of(
+        coverage: &Coverage,
+        joints: &[usize],
+        poses: &[Vec<JointTransform>],
+    ) -> ClipCoverage {
+        let keys: Vec<PoseKey> = poses
+            .iter()
+            .map(|p| {
+                let rotations: Vec<_> = p.iter().map(|t| t.rotation).collect();
+                pose_key(&rotations, joints)
+            })
+            .collect();
+        let distance = coverage.distances(&keys);
+        let mut sorted = distance.clone();
+        sorted.sort_by(f32::total_cmp);
+        ClipCoverage {
+            threshold: coverage.threshold,
+            beyond: (0..distance.len())
+                .filter(|&f| coverage.beyond(distance[f]))
+                .collect(),
+            median: crate::metrics::percentile(&sorted, 0.5) as f32,
+            max: sorted.last().copied().unwrap_or(0.0),
+            distance,
+        }
+    }
+
+    /// The `n` frames farthest from the training poses, farthest first (the first of equals).
+    pub fn farthest(&self, n: usize) -> Vec<usize> {
+        let mut frames: Vec<usize> = (0..self.distance.len()).collect();
+        frames.sort_by(|&a, &b| {
+            self.distance[b]
+                .total_cmp(&self.distance[a])
+                .then(a.cmp(&b))
+        });
+        frames.truncate(n);
+        frames
+    }
+
+    /// The frames within the trained range, in order.
+    pub fn within(&self) -> Vec<usize> {
+        (0..self.distance.len())
+            .filter(|f| self.beyond.binary_search(f).is_err())
+            .collect()
     }
 }

@@ -126,6 +126,13 @@ pub struct TrainInputs {
     /// head, arms) from a different real frame: covers pose combinations the clips lack.
     #[arg(long, default_value_t = TRAIN_DEFAULTS.recombine)]
     pub recombine: usize,
+    /// Pose coverage: generated training poses per balanced real one (0 turns it off). Half
+    /// recombine limb chains of real frames (bent up to 30 % further), half draw about half of the
+    /// garment's joints (hips, knees, spine, ...) uniformly across the rotation range the clips
+    /// show, widened by 30 % of it on each side: wide stances, knee raises and deep bends the
+    /// clips do not combine. The real poses stay in, so common poses keep their accuracy.
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.coverage, value_name = "PER_REAL_POSE")]
+    pub coverage: f32,
     /// Epochs between refreshes of the nearest-body-vertex candidates.
     #[arg(long, default_value_t = TRAIN_DEFAULTS.refresh_every)]
     pub refresh_every: usize,
@@ -170,6 +177,12 @@ impl TrainInputs {
             fps: self.clips.fps,
             fabric: &self.config,
         };
+        if !(self.coverage.is_finite() && self.coverage >= 0.0) {
+            bail!(
+                "--coverage must be 0 or more generated poses per real one, not {}",
+                self.coverage
+            );
+        }
         let (inputs, warnings) = Inputs::read(&files, strict)?;
         let settings = Settings {
             epochs,
@@ -181,6 +194,7 @@ impl TrainInputs {
             seed: self.seed,
             pose_threshold: self.pose_threshold,
             recombine: self.recombine,
+            coverage: self.coverage,
             refresh_every: self.refresh_every,
             refresh: match self.refresh {
                 RefreshArg::Auto => RefreshMode::Auto,

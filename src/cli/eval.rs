@@ -3,11 +3,11 @@
 use super::args::write_cache;
 use super::args::{ClipArgs, ComputeArgs, OutputArgs};
 use super::Execute;
-use crate::eval::{compare, lbs_frames, model_frames};
+use crate::eval::{compare, lbs_frames, model_frames, ClipCoverage, Comparison};
 use crate::io::gltf_body::read_body;
 use crate::metrics::{body_edges_under, ClothGeometry, Inside, Metrics};
 use crate::models::file::check_skeleton;
-use anyhow::Result;
+use anyhow::{bail, Result};
 use serde::Serialize;
 use std::path::PathBuf;
 
@@ -20,6 +20,13 @@ use std::path::PathBuf;
 /// normals), collided vertices (% with d·n < 0 against the nearest body vertex; "of which body
 /// overlap": those whose nearest body vertex is itself inside another part of the skinned body,
 /// e.g. a chin sunk into the chest, where no garment can be outside both) and gravity energy.
+///
+/// Coverage (models trained with this version): each frame's pose distance to the nearest
+/// training pose (radians: the largest rotation-vector difference over the garment's joints,
+/// the measure pose balancing uses), the frames beyond the trained range (distance ≥ the
+/// balancing threshold) and the metrics split within / beyond it, so the frames to check before
+/// shipping are named. `--clamp-weights` keeps the network's blend-shape weights within the range
+/// they took over the training poses (clamped correctives, as engine ML deformers do).
 #[derive(clap::Args)]
 pub struct Args {
     /// Trained model (.safetensors from `garmentbake train`).
@@ -41,6 +48,9 @@ pub struct Args {
     /// Also write a page that plays the garment cache on the body in a browser (see `view`).
     #[arg(long, value_name = "PAGE.html")]
     pub view: Option<PathBuf>,
+    /// Keep each blend-shape weight within the range it took over the training poses.
+    #[arg(long)]
+    pub clamp_weights: bool,
     #[command(flatten)]
     pub compute: ComputeArgs,
     #[command(flatten)]
@@ -62,6 +72,10 @@ pub struct Report {
     pub inside: SeriesInside,
     pub strain_pct: Strain,
     pub body_overlap_vertices: OverlapSummary,
+    /// Per-frame distance to the training poses and the metrics within / beyond the trained
+    /// range (absent for models trained before the coverage report).
+    pub coverage: Option<CoverageReport>,
+    pub clamped_weights: bool,
     pub pc2: PathBuf,
     pub body_out: Option<PathBuf>,
     /// With --view: the page and its size in bytes.
@@ -80,6 +94,44 @@ pub struct SeriesInside {
     pub lbs: Inside,
 }
 
+impl SeriesMetrics {
+    /// From a comparison of the model (first series) and plain LBS (second).
+    fn of(c: &Comparison) -> SeriesMetrics {
+        SeriesMetrics {
+            model: c.metrics[0],
+            lbs: c.metrics[1],
+        }
+    }
+}
+
+impl SeriesInside {
+    fn of(c: &Comparison) -> SeriesInside {
+        SeriesInside {
+            model: c.inside[0],
+            lbs: c.inside[1],
+        }
+    }
+}
+
+/// A clip's pose coverage and the figures of its frames within and beyond the trained range.
+#[derive(Serialize)]
+pub struct CoverageReport {
+    #[serde(flatten)]
+    pub clip: ClipCoverage,
+    /// The 8 frames farthest from the training poses (farthest first): the ones to look at.
+    pub farthest: Vec<usize>,
+    pub within: Option<Split>,
+    pub beyond_range: Option<Split>,
+}
+
+/// Model and plain-LBS figures over a subset of a clip's frames.
+#[derive(Serialize)]
+pub struct Split {
+    pub frames: usize,
+    pub metrics: SeriesMetrics,
+    pub inside: SeriesInside,
+}
+
 /// Mean edge strain |e − e_T| / e_T (%).
 #[derive(Serialize)]
 pub struct Strain {
@@ -96,7 +148,19 @@ impl Execute for Args {
         if let Some(page) = &self.view {
             super::view::check_page_path(page)?;
         }
-        let (model, device) = self.compute.load_model(&self.model)?;
+        let (mut model, device) = self.compute.load_model(&self.model)?;
+        if self.clamp_weights {
+            let Some(c) = &model.coverage else {
+                bail!(
+                    "{}: --clamp-weights needs the blend-shape weight range stored by `train` since the coverage report; retrain the model",
+                    self.model.display()
+                );
+            };
+            let (lo, hi) = (c.weight_min.clone(), c.weight_max.clone());
+            if let crate::models::Model::Pbns(p) = &mut model.model {
+                p.clamp_weights(&lo, &hi);
+            }
+        }
         let network = model.pbns()?;
         let body = match &self.body {
             Some(path) => {
@@ -140,7 +204,30 @@ impl Execute for Args {
             }
             None => None,
         };
-        let m = &comparison.metrics;
+        let coverage = model.coverage.as_ref().map(|c| {
+            let clip = ClipCoverage::of(c, &network.feature_joints, &poses);
+            let split = |frames: Vec<usize>| {
+                (!frames.is_empty()).then(|| {
+                    let pick = |s: &[Vec<[f32; 3]>]| {
+                        frames.iter().map(|&f| s[f].clone()).collect::<Vec<_>>()
+                    };
+                    let (g, l) = (pick(&garment), pick(&lbs));
+                    let p: Vec<_> = frames.iter().map(|&f| poses[f].clone()).collect();
+                    let c = compare(&geometry, &[&g, &l], &body, &under, &p);
+                    Split {
+                        frames: frames.len(),
+                        metrics: SeriesMetrics::of(&c),
+                        inside: SeriesInside::of(&c),
+                    }
+                })
+            };
+            CoverageReport {
+                farthest: clip.farthest(8),
+                within: split(clip.within()),
+                beyond_range: split(clip.beyond.clone()),
+                clip,
+            }
+        });
         Ok(Report {
             model: self
                 .model
@@ -151,20 +238,16 @@ impl Execute for Args {
             frames: anim.frame_count(),
             fps: anim.fps,
             garment_vertices: network.shape.vertices,
-            metrics: SeriesMetrics {
-                model: m[0],
-                lbs: m[1],
-            },
-            inside: SeriesInside {
-                model: comparison.inside[0],
-                lbs: comparison.inside[1],
-            },
+            metrics: SeriesMetrics::of(&comparison),
+            inside: SeriesInside::of(&comparison),
             strain_pct: Strain {
                 model: comparison.strain_pct[0],
                 lbs: comparison.strain_pct[1],
                 body_under_garment: comparison.body_strain_pct,
             },
             body_overlap_vertices: OverlapSummary::of(&comparison.body_overlap),
+            coverage,
+            clamped_weights: self.clamp_weights,
             pc2: self.out.clone(),
             body_out: self.body_out.clone(),
             view,
@@ -206,6 +289,15 @@ impl Execute for Args {
             "body vertices inside another part of the skinned body: median {} per frame, most {} (frame {})",
             o.median, o.most, o.worst_frame
         );
+        match &r.coverage {
+            Some(c) => print_coverage(c, r.frames),
+            None => println!(
+                "coverage: this model has no training poses stored (trained before the coverage report)"
+            ),
+        }
+        if r.clamped_weights {
+            println!("blend-shape weights clamped to their range over the training poses");
+        }
         println!("wrote {}", r.pc2.display());
         if let Some((page, bytes)) = &r.view {
             println!("wrote {} ({:.1} MB)", page.display(), *bytes as f64 / 1e6);
@@ -238,6 +330,30 @@ impl OverlapSummary {
             median: sorted.get(sorted.len() / 2).copied().unwrap_or(0),
             most,
             worst_frame,
+        }
+    }
+}
+
+fn print_coverage(c: &CoverageReport, frames: usize) {
+    let k = &c.clip;
+    println!(
+        "pose distance to the training poses: median {:.3}, max {:.3} rad; {} of {frames} frames beyond the trained range (≥ {} rad); farthest frames {:?}",
+        k.median,
+        k.max,
+        k.beyond.len(),
+        k.threshold,
+        c.farthest
+    );
+    for (name, split) in [("within", &c.within), ("beyond", &c.beyond_range)] {
+        if let Some(s) = split {
+            println!(
+                "  {name} the range ({} frames): edge model {:.3} / LBS {:.3} mm, inside model {:.2} / LBS {:.2} %",
+                s.frames,
+                s.metrics.model.edge_mm,
+                s.metrics.lbs.edge_mm,
+                s.inside.model.inside_pct,
+                s.inside.lbs.inside_pct
+            );
         }
     }
 }

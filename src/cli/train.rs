@@ -4,6 +4,7 @@ use super::args::{OutputArgs, TrainInputs, TRAIN_DEFAULTS};
 use super::Execute;
 use crate::models::file::EpochRecord;
 use crate::train::pbns::{PhaseSplit, Trainer};
+use crate::train::poses::{count, PoseKind};
 use crate::train::{fit_every, CheckpointEvery, FitOptions, Fitted, Training};
 use anyhow::Result;
 use serde::Serialize;
@@ -50,6 +51,12 @@ pub struct Args {
     /// Append one JSON object per epoch (loss terms, metrics, learning rate, seconds) to this file.
     #[arg(long)]
     pub log: Option<PathBuf>,
+    /// Early stopping: stop once this many epochs pass without a lower validation loss (the
+    /// training potential on the held-out poses, computed every --validate-every epochs), and
+    /// write the best validated epoch's weights as OUT. The learning-rate schedule still spans
+    /// --epochs, so a run that stops early stops at a higher rate than the schedule's end.
+    #[arg(long, value_name = "EPOCHS", value_parser = clap::value_parser!(u64).range(1..))]
+    pub patience: Option<u64>,
     #[command(flatten)]
     pub output: OutputArgs,
 }
@@ -62,10 +69,16 @@ pub struct Report {
     /// Balanced real poses for training and validation, recombined extra ones, frames read.
     pub poses_train: usize,
     pub poses_recombined: usize,
+    /// Generated poses whose garment joints were drawn across their widened ranges.
+    pub poses_sampled: usize,
     pub poses_validation: usize,
     pub frames_seen: usize,
     pub warnings: Vec<String>,
     pub last: Option<EpochRecord>,
+    /// The validated epoch with the lowest validation loss, and that loss; with --patience the
+    /// model holds this epoch's weights.
+    pub best_epoch: Option<usize>,
+    pub best_validation_loss: Option<f64>,
     pub phases: PhaseSplit,
 }
 
@@ -73,7 +86,8 @@ impl Execute for Args {
     type Report = Report;
 
     fn execute(&self, say: &dyn Fn(&str)) -> Result<Report> {
-        let (inputs, settings, warnings) = self.inputs.load(self.epochs, self.strict)?;
+        let (inputs, mut settings, warnings) = self.inputs.load(self.epochs, self.strict)?;
+        settings.patience = self.patience.map(|p| p as usize);
         for w in &warnings {
             if !self.output.json {
                 eprintln!("warning: {w}");
@@ -95,15 +109,17 @@ impl Execute for Args {
         };
         let fitted = fit_every(&mut trainer, &opts, self.checkpoint_every)?;
         let p = &trainer.poses;
-        let recombined = p.train.iter().filter(|x| x.recombined).count();
         Ok(Report {
             fitted,
-            poses_train: p.train.len() - recombined,
-            poses_recombined: recombined,
+            poses_train: count(&p.train, PoseKind::Clip),
+            poses_recombined: count(&p.train, PoseKind::Recombined),
+            poses_sampled: count(&p.train, PoseKind::Sampled),
             poses_validation: p.validation.len(),
             frames_seen: p.frames_seen,
             warnings,
             last: trainer.info().history.last().cloned(),
+            best_epoch: trainer.best().map(|b| b.0),
+            best_validation_loss: trainer.best().map(|b| b.1),
             phases: trainer.times().split(),
         })
     }
@@ -121,6 +137,14 @@ impl Execute for Args {
                     r.poses_validation, v.edge_mm, v.bend, v.collided_pct, v.gravity_j
                 );
             }
+            if let Some(l) = e.validation_loss {
+                println!("validation loss {l:.6} (training loss {:.6})", e.loss);
+            }
+        }
+        if let Some(why) = &r.fitted.stopped_early {
+            println!("stopped early after epoch {}: {why}", r.fitted.epochs);
+        } else if let (Some(e), Some(l)) = (r.best_epoch, r.best_validation_loss) {
+            println!("lowest validation loss {l:.6} at epoch {e}");
         }
         println!("{}", r.phases);
         println!("{}", r.fitted.wall);
@@ -143,12 +167,13 @@ fn say_poses(trainer: &Trainer, say: &dyn Fn(&str)) {
         .iter()
         .map(|&j| trainer.file.body.skeleton.joint_names[j].as_str())
         .collect();
-    let recombined = p.train.iter().filter(|x| x.recombined).count();
+    let real = count(&p.train, PoseKind::Clip);
     say(&format!(
-        "poses: {} balanced of {} frames ({} train + {recombined} recombined, {} validation; threshold {} rad on {})",
-        p.train.len() - recombined + p.validation.len(),
+        "poses: {} balanced of {} frames ({real} train + {} recombined + {} range-sampled, {} validation; threshold {} rad on {})",
+        real + p.validation.len(),
         p.frames_seen,
-        p.train.len() - recombined,
+        count(&p.train, PoseKind::Recombined),
+        count(&p.train, PoseKind::Sampled),
         p.validation.len(),
         trainer.settings.pose_threshold,
         names.join(", ")

@@ -9,6 +9,7 @@
 //! `HashMap` with several would serialise in random order) and the JSON has sorted keys and no
 //! timestamps or absolute paths. Checkpoints are the same format plus the Adam state.
 
+use super::coverage::Coverage;
 use super::dynamic::space::Consts;
 use super::dynamic::{Dynamic, MotionEncoder, MotionShape, Seeds, Space, SpaceShape, UvRaster};
 use super::pbns::{flat, Pbns, PbnsShape};
@@ -244,10 +245,21 @@ pub struct TrainingInfo {
     /// Training poses made by recombining limb chains of real frames (part of `poses_train`).
     #[serde(default)]
     pub poses_recombined: usize,
+    /// Training poses whose garment joints were drawn across their widened ranges (part of
+    /// `poses_train`).
+    #[serde(default)]
+    pub poses_sampled: usize,
     /// Initial weights were inpainted beyond this distance from the body (metres).
     pub inpaint_beyond: Option<f32>,
     /// Vertices whose initial weights were inpainted.
     pub inpainted: usize,
+    /// With `--patience`: stop after this many epochs without a lower validation loss, and
+    /// write the weights of the best validated epoch.
+    #[serde(default)]
+    pub patience: Option<usize>,
+    /// The epoch whose weights the model holds when `--patience` kept the best one.
+    #[serde(default)]
+    pub best_epoch: Option<usize>,
 }
 
 /// The PBNS potential's weighted terms (mean over an epoch's steps).
@@ -276,6 +288,10 @@ pub struct EpochRecord {
     pub train: Metrics,
     /// Exact metrics on the validation poses (every few epochs, and the last).
     pub validation: Option<Metrics>,
+    /// The training potential (the same weighted terms as `loss`) on the validation poses, with
+    /// exact nearest body vertices: what `--patience` watches. Validated epochs only.
+    #[serde(default)]
+    pub validation_loss: Option<f64>,
 }
 
 /// Everything a model file holds.
@@ -288,6 +304,9 @@ pub struct ModelFile {
     pub body: Body,
     /// Extra tensors (a checkpoint's optimizer state), by name.
     pub extra: Vec<(String, Tensor)>,
+    /// The training poses and blend-shape weight ranges (PBNS models trained since the
+    /// coverage report; `None` in older files and dynamic models).
+    pub coverage: Option<Coverage>,
 }
 
 impl ModelFile {
@@ -376,6 +395,9 @@ pub fn to_bytes(file: &ModelFile) -> Result<Vec<u8>> {
         "body.weights".into(),
         Blob::floats(&b.skin.joint_weights, b.skin.influences),
     ));
+    if let Some(c) = &file.coverage {
+        blobs.extend(coverage_blobs(c));
+    }
     for (name, t) in &file.extra {
         blobs.push((name.clone(), Blob::float(t)));
     }
@@ -394,6 +416,58 @@ fn pbns_blobs(m: &Pbns) -> Vec<(String, Blob)> {
     blobs.push(("W.joints".into(), Blob::int(&m.joints)));
     blobs.push(("W.weights".into(), Blob::float(&m.weights())));
     blobs
+}
+
+/// Coverage tensors: the training poses' keys `[P, J·3]` and the weight range `[2, K]`.
+fn coverage_blobs(c: &Coverage) -> Vec<(String, Blob)> {
+    let joints = c.poses.first().map_or(0, Vec::len);
+    let keys: Vec<f32> = c
+        .poses
+        .iter()
+        .flat_map(|p| p.iter().flat_map(|v| [v.x, v.y, v.z]))
+        .collect();
+    let range: Vec<f32> = [c.weight_min.as_slice(), c.weight_max.as_slice()].concat();
+    vec![
+        (
+            COVERAGE_POSES.into(),
+            Blob::floats(&keys, 3 * joints.max(1)),
+        ),
+        (
+            COVERAGE_WEIGHTS.into(),
+            Blob::floats(&range, c.weight_min.len().max(1)),
+        ),
+    ]
+}
+
+const COVERAGE_POSES: &str = "coverage.poses";
+const COVERAGE_WEIGHTS: &str = "coverage.weight_range";
+
+/// The coverage tensors, when the file has them.
+fn load_coverage(t: &Tensors, threshold: f32) -> Result<Option<Coverage>> {
+    let names = t.st.names();
+    if !names.contains(&COVERAGE_POSES) {
+        return Ok(None);
+    }
+    let keys = f32s(&t.view(COVERAGE_POSES)?)?;
+    let columns = t.view(COVERAGE_POSES)?.shape().get(1).copied().unwrap_or(0);
+    let range = f32s(&t.view(COVERAGE_WEIGHTS)?)?;
+    if columns == 0 || !columns.is_multiple_of(3) || range.len() % 2 != 0 {
+        return Err(t.fail("malformed coverage tensors".into()));
+    }
+    let (lo, hi) = range.split_at(range.len() / 2);
+    Ok(Some(Coverage {
+        poses: keys
+            .chunks_exact(columns)
+            .map(|p| {
+                p.chunks_exact(3)
+                    .map(|v| nalgebra::Vector3::new(v[0], v[1], v[2]))
+                    .collect()
+            })
+            .collect(),
+        threshold,
+        weight_min: lo.to_vec(),
+        weight_max: hi.to_vec(),
+    }))
 }
 
 /// Reads only the description (for `inspect`).
@@ -496,7 +570,14 @@ pub fn load(path: &Path, device: Device) -> Result<ModelFile> {
         ),
     };
     let common = |name: &str| {
-        name.starts_with("lbs.") || name.starts_with("body.") || name == "garment.rest"
+        name.starts_with("lbs.")
+            || name.starts_with("body.")
+            || name.starts_with("coverage.")
+            || name == "garment.rest"
+    };
+    let coverage = match &info.model {
+        KindInfo::Pbns(p) => load_coverage(&tensors, p.training.pose_threshold)?,
+        KindInfo::Dynamic(_) => None,
     };
     let mut extra = Vec::new();
     for name in tensors.st.names() {
@@ -512,6 +593,7 @@ pub fn load(path: &Path, device: Device) -> Result<ModelFile> {
         garment,
         body,
         extra,
+        coverage,
     })
 }
 
@@ -598,6 +680,7 @@ fn load_pbns(t: &Tensors, info: &PbnsInfo) -> Result<Pbns> {
         template: t.shaped("garment.rest", &[n, 3])?,
         joints: t.shaped("W.joints", &[n, k])?.to_kind(Kind::Int64),
         logits: t.shaped("W.logits", &[n, k])?,
+        clamp: None,
     })
 }
 

@@ -1,6 +1,7 @@
 //! Neural garment models (PBNS now; the dynamic model next), their inputs and the one model file
 //! that holds any of them, its kind named in the metadata.
 
+pub mod coverage;
 pub mod dynamic;
 pub mod file;
 pub mod pbns;

@@ -46,6 +46,9 @@ pub struct Pbns {
     pub joints: Tensor,
     /// Slot logits `[N, influences]`.
     pub logits: Tensor,
+    /// Clamped correctives: the blend-shape weights kept within `(lowest, highest)` `[K]` each
+    /// (the range over the training poses), as engine ML deformers do on unseen poses.
+    pub clamp: Option<(Tensor, Tensor)>,
 }
 
 /// What the forward pass returns: posed vertices and the rest-space PSD displacement (which the
@@ -89,6 +92,7 @@ impl Pbns {
             template: points_tensor(template, device),
             joints: Tensor::from_slice(&joints).view([n, k]).to_device(device),
             logits: Tensor::from_slice(&logits).view([n, k]).to_device(device),
+            clamp: None,
         }
     }
 
@@ -142,6 +146,10 @@ impl Pbns {
             template: self.template.shallow_clone(),
             joints: self.joints.shallow_clone(),
             logits: find("W.logits", &self.logits),
+            clamp: self
+                .clamp
+                .as_ref()
+                .map(|(lo, hi)| (lo.shallow_clone(), hi.shallow_clone())),
         }
     }
 
@@ -177,7 +185,19 @@ impl Pbns {
         for (w, b) in &self.mlp {
             x = b.addmm(&x, w).relu();
         }
-        x
+        match &self.clamp {
+            Some((lo, hi)) => x.maximum(lo).minimum(hi),
+            None => x,
+        }
+    }
+
+    /// Keeps every blend-shape weight within `[lowest[k], highest[k]]` from now on.
+    pub fn clamp_weights(&mut self, lowest: &[f32], highest: &[f32]) {
+        let device = self.psd.device();
+        self.clamp = Some((
+            Tensor::from_slice(lowest).to_device(device),
+            Tensor::from_slice(highest).to_device(device),
+        ));
     }
 
     /// `X(θ)·D` in rest space, `[B, N, 3]`.

@@ -359,6 +359,7 @@ impl SpaceTrainer {
             garment: garment.mesh,
             body,
             extra: Vec::new(),
+            coverage: None,
         };
         Ok(SpaceTrainer {
             file,

@@ -11,12 +11,13 @@ use crate::body::{Body, PosedBody};
 use crate::fabric::Fabric;
 use crate::garment::Garment;
 use crate::metrics::{ClothGeometry, Metrics};
+use crate::models::coverage::Coverage;
 use crate::models::file::{
     BodyInfo, EpochRecord, GarmentInfo, KindInfo, LossTerms, ModelFile, ModelInfo, PbnsInfo,
     TrainingInfo, FORMAT, VERSION,
 };
 use crate::models::pbns::flat;
-use crate::models::pose_features::{PoseBatch, PER_JOINT};
+use crate::models::pose_features::{tensor_points, PoseBatch, PER_JOINT};
 use crate::models::{Model, Pbns, PbnsShape};
 use crate::motion::{load_clip, read_maps};
 use crate::rig::{weights, SkelAnimation};
@@ -34,9 +35,8 @@ const TOUCH: f32 = 0.05;
 pub struct Settings {
     pub epochs: usize,
     pub batch: usize,
+    /// The initial learning rate; it decays over `epochs` by [`super::cosine_rate`].
     pub learning_rate: f64,
-    /// The learning rate decays (cosine) to this fraction of the initial one at the last epoch.
-    pub final_lr_fraction: f64,
     pub width: usize,
     pub layers: usize,
     pub influences: usize,
@@ -48,6 +48,9 @@ pub struct Settings {
     pub validation: f32,
     /// Recombined training poses per real one (limb chains from different frames).
     pub recombine: usize,
+    /// Pose coverage: generated training poses per real one, half recombined limb chains, half
+    /// garment joints drawn across their widened ranges (0: the clips' poses only).
+    pub coverage: f32,
     /// Body vertices averaged for the proximity weights.
     pub neighbours: usize,
     /// Candidate body vertices per garment vertex.
@@ -65,6 +68,9 @@ pub struct Settings {
     pub validate_every: usize,
     /// Garment vertices farther than this from the body at rest get inpainted weights.
     pub inpaint_beyond: Option<f32>,
+    /// Early stopping: stop after this many epochs without a lower validation loss and keep the
+    /// best validated epoch's weights as the model.
+    pub patience: Option<usize>,
 }
 
 /// How candidate lists are refreshed.
@@ -85,7 +91,6 @@ impl Settings {
         epochs: 1000,
         batch: 16,
         learning_rate: 1e-3,
-        final_lr_fraction: 0.1,
         width: 256,
         layers: 4,
         influences: 4,
@@ -95,6 +100,7 @@ impl Settings {
         joint_share: 0.01,
         validation: 0.15,
         recombine: 0,
+        coverage: 1.0,
         neighbours: 8,
         candidates: 6,
         refresh_every: 2,
@@ -104,6 +110,7 @@ impl Settings {
         weights_lr_scale: 10.0,
         validate_every: 5,
         inpaint_beyond: Some(0.02),
+        patience: None,
     };
 
     /// Whether candidates are refreshed by brute force on the device.
@@ -338,6 +345,15 @@ pub struct Trainer {
     installed: Snapshot,
     /// A candidate refresh running on a worker thread, applied at the next due epoch.
     pending: Option<PendingRefresh>,
+    /// The validated epoch with the lowest validation loss so far.
+    best: Option<Best>,
+}
+
+/// The best validated epoch, and with `--patience` its weights (the model that is written).
+struct Best {
+    epoch: usize,
+    loss: f64,
+    snapshot: Option<Snapshot>,
 }
 
 /// Named trainable tensors of the model at some epoch.
@@ -352,6 +368,8 @@ struct PendingRefresh {
 /// Checkpoint tensor name prefixes of the installed and the pending refresh's snapshots.
 const INSTALLED: &str = "refresh.installed.";
 const PENDING: &str = "refresh.pending.";
+/// Checkpoint tensor name prefix of the best epoch's weights (with `--patience`).
+const BEST: &str = "best.";
 
 impl Trainer {
     /// Builds the pose set, the model (proximity weights) and all precomputed tensors.
@@ -393,14 +411,26 @@ impl Trainer {
             settings.validation,
             settings.seed,
         );
-        let extra = poses::recombined(
+        let real = poses.train.len();
+        let generated = (settings.coverage.max(0.0) * real as f32).round() as usize;
+        let recombined = poses::recombined(
             &poses.train,
             &body.skeleton,
-            settings.recombine * poses.train.len(),
+            settings.recombine * real + generated / 2,
             poses::RECOMBINE_AMPLIFY,
             settings.seed,
         );
-        poses.train.extend(extra);
+        let ranges =
+            poses::JointRanges::of(&clips, body.skeleton.joint_count()).widened(poses::RANGE_WIDEN);
+        let sampled = poses::range_sampled(
+            &poses.train,
+            &ranges,
+            &poses.joints,
+            generated - generated / 2,
+            settings.seed,
+        );
+        poses.train.extend(recombined);
+        poses.train.extend(sampled);
         if poses.train.is_empty() || poses.validation.is_empty() {
             bail!(
                 "only {} balanced poses from {} frames: add clips or lower --pose-threshold",
@@ -463,6 +493,7 @@ impl Trainer {
                 garment: garment.mesh,
                 body,
                 extra: Vec::new(),
+                coverage: None,
             },
             settings,
             poses,
@@ -473,6 +504,7 @@ impl Trainer {
             refreshed: false,
             installed: Vec::new(),
             pending: None,
+            best: None,
         })
     }
 
@@ -527,13 +559,9 @@ impl Trainer {
         self.train.len().div_ceil(self.settings.batch)
     }
 
-    /// Learning rate of `epoch`: cosine decay to `final_lr_fraction`.
+    /// Learning rate of `epoch`: the trainers' shared cosine schedule over `--epochs`.
     pub fn learning_rate(&self, epoch: usize) -> f64 {
-        let s = &self.settings;
-        let t = epoch as f64 / (s.epochs.max(2) - 1) as f64;
-        let f = s.final_lr_fraction
-            + (1.0 - s.final_lr_fraction) * 0.5 * (1.0 + (std::f64::consts::PI * t.min(1.0)).cos());
-        s.learning_rate * f
+        super::cosine_rate(self.settings.learning_rate, epoch, self.settings.epochs)
     }
 
     /// Candidate upkeep at the start of an epoch. Every `refresh_every` epochs the model's
@@ -728,6 +756,10 @@ impl Trainer {
             on_step(s + 1, total);
         }
         let m = sum.mean(steps);
+        let validated = self.validation_due(epoch + 1).then(|| self.validate());
+        if let Some((_, loss)) = validated {
+            self.track_best(epoch + 1, loss);
+        }
         let record = EpochRecord {
             epoch: epoch + 1,
             loss: m.terms.total(),
@@ -739,7 +771,8 @@ impl Trainer {
                 collided_overlap_pct: 0.0,
                 gravity_j: m.gravity_j,
             },
-            validation: self.validation_due(epoch + 1).then(|| self.validate()),
+            validation: validated.map(|(m, _)| m),
+            validation_loss: validated.map(|(_, l)| l),
         };
         let info = self.info_mut();
         info.history.push(record.clone());
@@ -753,13 +786,69 @@ impl Trainer {
             || epochs_done >= self.settings.epochs
     }
 
-    /// Exact metrics on the validation poses.
-    pub fn validate(&mut self) -> Metrics {
+    /// Exact metrics on the validation poses, and the training potential there (with each
+    /// vertex's exact nearest body vertex instead of the training candidates).
+    pub fn validate(&mut self) -> (Metrics, f64) {
         let t = Instant::now();
-        let x = self.model().predict_points(&self.validation);
-        let m = self.geometry.frames(&x, &self.validation_bodies);
+        let _no_grad = tch::no_grad_guard();
+        let out = self.model().forward(&self.validation);
+        let n = self.model().shape.vertices;
+        let x: Vec<Vec<[f32; 3]>> = tensor_points(&out.vertices)
+            .chunks_exact(n)
+            .map(<[_]>::to_vec)
+            .collect();
+        let metrics = self.geometry.frames(&x, &self.validation_bodies);
+        let (points, normals) = nearest_body_points(&x, &self.validation_bodies);
+        let device = self.settings.device;
+        let shape = out.vertices.size();
+        let tensor = |v: Vec<[f32; 3]>| {
+            Tensor::from_slice(v.as_flattened())
+                .view(shape.as_slice())
+                .to_device(device)
+        };
+        let terms = losses::potential(
+            &self.cloth,
+            &self.file.info.fabric,
+            &out.vertices,
+            &out.displacement,
+            &tensor(points),
+            &tensor(normals),
+        );
+        let loss = terms.total().double_value(&[]);
         self.times.validation += t.elapsed();
-        m
+        (metrics, loss)
+    }
+
+    /// Remembers the validated epoch `epoch` if its loss is the lowest so far (with
+    /// `--patience`, its weights too: they become the model).
+    fn track_best(&mut self, epoch: usize, loss: f64) {
+        if self.best.as_ref().is_some_and(|b| b.loss <= loss) {
+            return;
+        }
+        let snapshot = self.settings.patience.map(|_| self.snapshot());
+        self.best = Some(Best {
+            epoch,
+            loss,
+            snapshot,
+        });
+    }
+
+    /// The validated epoch with the lowest validation loss so far, and that loss.
+    pub fn best(&self) -> Option<(usize, f64)> {
+        self.best.as_ref().map(|b| (b.epoch, b.loss))
+    }
+
+    /// Why to stop: `--patience` epochs have passed since the best validation loss.
+    pub fn early_stop(&self) -> Option<String> {
+        let patience = self.settings.patience?;
+        let best = self.best.as_ref()?;
+        let since = self.epoch().saturating_sub(best.epoch);
+        (since >= patience).then(|| {
+            format!(
+                "validation loss {:.6} at epoch {} not improved for {since} epochs (--patience {patience}); the model holds epoch {}'s weights",
+                best.loss, best.epoch, best.epoch
+            )
+        })
     }
 
     /// The model file with the current weights (no optimizer state).
@@ -783,13 +872,53 @@ impl Trainer {
             if let Some(p) = &self.pending {
                 extra.extend(named(PENDING, &p.snapshot));
             }
+            if let Some(s) = self.best.as_ref().and_then(|b| b.snapshot.as_ref()) {
+                extra.extend(named(BEST, s));
+            }
             extra
         } else {
             Vec::new()
         };
+        // With --patience the model written is the best validated epoch's; a checkpoint keeps
+        // the current weights so that --resume continues the run.
+        let best = match &self.best {
+            Some(Best {
+                epoch,
+                snapshot: Some(s),
+                ..
+            }) if !checkpoint => Some((*epoch, Model::Pbns(self.model().with_snapshot(s)))),
+            _ => None,
+        };
+        let current = best.map(|(epoch, model)| {
+            self.info_mut().training.best_epoch = Some(epoch);
+            std::mem::replace(&mut self.file.model, model)
+        });
+        self.file.coverage = Some(self.coverage());
         let r = crate::models::file::save(path, &self.file);
+        if let Some(model) = current {
+            self.file.model = model;
+            self.info_mut().training.best_epoch = None;
+        }
         self.file.extra.clear();
         r
+    }
+
+    /// The training poses' keys and the blend-shape weight range of the model being written
+    /// over them (what the coverage report and clamped correctives read).
+    fn coverage(&self) -> Coverage {
+        let weights = tch::no_grad(|| self.model().coefficients(&self.train.features));
+        let range = |t: Tensor| -> Vec<f32> { flat(&t, Kind::Float) };
+        Coverage {
+            poses: self
+                .poses
+                .train
+                .iter()
+                .map(|p| p.key(&self.poses.joints))
+                .collect(),
+            threshold: self.settings.pose_threshold,
+            weight_min: range(weights.amin(0, false)),
+            weight_max: range(weights.amax(0, false)),
+        }
     }
 
     /// Continues from a checkpoint written by [`Trainer::save`] for the same inputs.
@@ -839,6 +968,11 @@ impl Trainer {
                 .collect()
         };
         let (installed, pending) = (snapshot(INSTALLED), snapshot(PENDING));
+        self.best = best_of(&self.info().history).map(|(epoch, loss)| Best {
+            epoch,
+            loss,
+            snapshot: Some(snapshot(BEST)).filter(|s| !s.is_empty()),
+        });
         if !installed.is_empty() {
             self.refresh_from(installed, self.settings.dense_refresh());
         }
@@ -873,6 +1007,10 @@ impl Training for Trainer {
         Trainer::resume(self, checkpoint)
     }
 
+    fn stop_reason(&self) -> Option<String> {
+        self.early_stop()
+    }
+
     fn phases(&self) -> TrainerPhases {
         TrainerPhases {
             validation: self.times.validation.as_secs_f64(),
@@ -895,6 +1033,40 @@ pub struct EpochLine {
     #[serde(flatten)]
     pub record: EpochRecord,
     pub learning_rate: f64,
+}
+
+/// The validated epoch with the lowest validation loss (the first of equals) and that loss.
+fn best_of(history: &[EpochRecord]) -> Option<(usize, f64)> {
+    history
+        .iter()
+        .filter_map(|e| Some((e.epoch, e.validation_loss?)))
+        .fold(None, |best, (e, l)| match best {
+            Some((_, b)) if b <= l => best,
+            _ => Some((e, l)),
+        })
+}
+
+/// Each garment vertex's exact nearest body vertex (position, normal) in its pose's body.
+fn nearest_body_points(
+    x: &[Vec<[f32; 3]>],
+    bodies: &[PosedBody],
+) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
+    use rayon::prelude::*;
+    let per_pose: Vec<(Vec<[f32; 3]>, Vec<[f32; 3]>)> = x
+        .par_iter()
+        .zip(bodies)
+        .map(|(frame, body)| {
+            frame
+                .iter()
+                .map(|&p| {
+                    let b = body.index.nearest(p).0 as usize;
+                    (body.points[b], body.normals[b])
+                })
+                .unzip()
+        })
+        .collect();
+    let (points, normals): (Vec<_>, Vec<_>) = per_pose.into_iter().unzip();
+    (points.concat(), normals.concat())
 }
 
 /// Joints that move the garment, or the body parts it can touch (a long skirt's hem meets the
@@ -962,9 +1134,12 @@ fn describe(
                 pose_threshold: settings.pose_threshold,
                 poses_train: poses.train.len(),
                 poses_validation: poses.validation.len(),
-                poses_recombined: poses.train.iter().filter(|p| p.recombined).count(),
+                poses_recombined: poses::count(&poses.train, poses::PoseKind::Recombined),
+                poses_sampled: poses::count(&poses.train, poses::PoseKind::Sampled),
                 inpaint_beyond: settings.inpaint_beyond,
                 inpainted,
+                patience: settings.patience,
+                best_epoch: None,
             },
             history: Vec::new(),
         }),

@@ -9,10 +9,26 @@
 //! The physical loss needs no ground truth, so any plausible pose can be trained on. Two clips
 //! give a few hundred poses, and an unseen clip combines the same joint ranges differently (head
 //! bowed while an arm is raised): [`recombined`] adds training poses that take each limb chain
-//! (a leg, the spine, the neck and head, an arm) from a different real frame.
+//! (a leg, the spine, the neck and head, an arm) from a different real frame, and
+//! [`range_sampled`] adds poses whose garment joints are drawn across the rotation ranges the
+//! clips show, widened: hips, knees and spine further than any clip took them together.
 
+use crate::models::coverage::{pose_distance, pose_key, PoseKey};
 use crate::rig::{JointTransform, SkelAnimation, Skeleton, Skin};
 use nalgebra::{UnitQuaternion, Vector3};
+use serde::Serialize;
+
+/// Where a training pose comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PoseKind {
+    /// A frame of a clip.
+    Clip,
+    /// Made by [`recombined`]: limb chains from other frames.
+    Recombined,
+    /// Made by [`range_sampled`]: garment joints drawn across their widened ranges.
+    Sampled,
+}
 
 /// One training pose: where it came from and its local joint transforms.
 #[derive(Clone, Debug, PartialEq)]
@@ -20,8 +36,20 @@ pub struct Pose {
     pub clip: usize,
     pub frame: usize,
     pub local: Vec<JointTransform>,
-    /// Made by [`recombined`] (limb chains from other frames), not a frame of a clip.
-    pub recombined: bool,
+    pub kind: PoseKind,
+}
+
+impl Pose {
+    /// The pose as balancing and the coverage report compare it.
+    pub fn key(&self, joints: &[usize]) -> PoseKey {
+        let rotations: Vec<UnitQuaternion<f32>> = self.local.iter().map(|t| t.rotation).collect();
+        pose_key(&rotations, joints)
+    }
+}
+
+/// How many poses of each kind a set holds.
+pub fn count(poses: &[Pose], kind: PoseKind) -> usize {
+    poses.iter().filter(|p| p.kind == kind).count()
 }
 
 pub struct PoseSet {
@@ -57,17 +85,12 @@ pub fn moving_joints(skeleton: &Skeleton, skin: &Skin, min_share: f32) -> Vec<us
 
 /// Greedy balanced selection over all frames of all clips: `(clip, frame)` pairs, in order.
 pub fn balanced(clips: &[SkelAnimation], joints: &[usize], threshold: f32) -> Vec<(usize, usize)> {
-    let mut kept: Vec<Vec<Vector3<f32>>> = Vec::new();
+    let mut kept: Vec<PoseKey> = Vec::new();
     let mut out = Vec::new();
     for (c, clip) in clips.iter().enumerate() {
         for f in 0..clip.frame_count() {
-            let rv: Vec<Vector3<f32>> = joints
-                .iter()
-                .map(|&j| clip.rotations[f][j].scaled_axis())
-                .collect();
-            let near = kept
-                .iter()
-                .any(|k| k.iter().zip(&rv).all(|(a, b)| (a - b).amax() < threshold));
+            let rv = pose_key(&clip.rotations[f], joints);
+            let near = kept.iter().any(|k| pose_distance(k, &rv) < threshold);
             if !near {
                 kept.push(rv);
                 out.push((c, f));
@@ -92,7 +115,7 @@ pub fn pose_set(
         clip: c,
         frame: f,
         local: clips[c].local_pose(f),
-        recombined: false,
+        kind: PoseKind::Clip,
     };
     let (val, train) = picked.split_at(n_val);
     PoseSet {
@@ -163,7 +186,92 @@ pub fn recombined(
                 clip: base.clip,
                 frame: base.frame,
                 local,
-                recombined: true,
+                kind: PoseKind::Recombined,
+            }
+        })
+        .collect()
+}
+
+/// How far beyond the clips' range a sampled joint may turn, as a share of that range on each
+/// side (the same reach as [`RECOMBINE_AMPLIFY`]: unseen clips go a little further).
+pub const RANGE_WIDEN: f32 = 0.3;
+
+/// Share of a sampled pose's garment joints drawn from their ranges (the rest keep the base
+/// frame's rotations), so a sample changes a few joints at a time rather than all at once.
+const RESAMPLED_SHARE: f64 = 0.5;
+
+/// Per joint, the lowest and highest value of each rotation-vector component over every frame of
+/// the clips (the units of [`pose_key`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct JointRanges {
+    pub lowest: Vec<Vector3<f32>>,
+    pub highest: Vec<Vector3<f32>>,
+}
+
+impl JointRanges {
+    pub fn of(clips: &[SkelAnimation], joint_count: usize) -> JointRanges {
+        let mut r = JointRanges {
+            lowest: vec![Vector3::repeat(f32::INFINITY); joint_count],
+            highest: vec![Vector3::repeat(f32::NEG_INFINITY); joint_count],
+        };
+        for clip in clips {
+            for frame in &clip.rotations {
+                for (j, q) in frame.iter().enumerate().take(joint_count) {
+                    let v = q.scaled_axis();
+                    r.lowest[j] = r.lowest[j].inf(&v);
+                    r.highest[j] = r.highest[j].sup(&v);
+                }
+            }
+        }
+        r
+    }
+
+    /// Each range grown by `share` of its span on both sides.
+    pub fn widened(&self, share: f32) -> JointRanges {
+        let grow = |j: usize| (self.highest[j] - self.lowest[j]).map(|s| s.max(0.0) * share);
+        JointRanges {
+            lowest: (0..self.lowest.len())
+                .map(|j| self.lowest[j] - grow(j))
+                .collect(),
+            highest: (0..self.highest.len())
+                .map(|j| self.highest[j] + grow(j))
+                .collect(),
+        }
+    }
+}
+
+/// `count` synthetic poses: each starts from a random real pose and draws about half of the
+/// garment `joints` (hips, knees, spine: what moves the garment) uniformly within `ranges`, so
+/// wide stances, raised knees and deep bends appear in combinations no clip has.
+pub fn range_sampled(
+    real: &[Pose],
+    ranges: &JointRanges,
+    joints: &[usize],
+    count: usize,
+    seed: u64,
+) -> Vec<Pose> {
+    if real.is_empty() {
+        return Vec::new();
+    }
+    let mut rng = Rng::new(seed.wrapping_add(0xE703_7ED1_A0B4_28DB));
+    let mut unit = move || rng.next_u64() as f64 / u64::MAX as f64;
+    (0..count)
+        .map(|_| {
+            let base = &real[((unit() * real.len() as f64) as usize).min(real.len() - 1)];
+            let mut local = base.local.clone();
+            for &j in joints {
+                if unit() >= RESAMPLED_SHARE {
+                    continue;
+                }
+                let (lo, hi) = (ranges.lowest[j], ranges.highest[j]);
+                let v = Vector3::from_fn(|c, _| lo[c] + (hi[c] - lo[c]) * unit() as f32);
+                local[j].rotation = UnitQuaternion::from_scaled_axis(v);
+            }
+            Pose {
+                clip: base.clip,
+                frame: base.frame,
+                local,
+                kind: PoseKind::Sampled,
             }
         })
         .collect()

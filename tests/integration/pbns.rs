@@ -49,6 +49,25 @@ fn tiny_trainer(seed: u64) -> Trainer {
 
 /// The same with `epochs` in the learning-rate schedule.
 fn tiny_trainer_for(seed: u64, epochs: usize) -> Trainer {
+    tiny_trainer_with(Settings {
+        epochs,
+        seed,
+        ..tiny_settings()
+    })
+}
+
+/// The tiny skirt training's settings.
+fn tiny_settings() -> Settings {
+    Settings {
+        batch: 4,
+        width: 16,
+        pose_threshold: 0.6,
+        weights_lr_scale: 50.0,
+        ..Settings::default()
+    }
+}
+
+fn tiny_trainer_with(settings: Settings) -> Trainer {
     let b = body().clone();
     let clip = load_clip(&sample("motions/131_01.bvh"), &[], &b.skeleton, Some(30.0)).unwrap();
     let inputs = Inputs {
@@ -57,15 +76,6 @@ fn tiny_trainer_for(seed: u64, epochs: usize) -> Trainer {
         fabric: Fabric::load("cotton").unwrap(),
         clips: vec![clip.animation],
         motion_names: vec!["131_01.bvh".into()],
-    };
-    let settings = Settings {
-        epochs,
-        batch: 4,
-        width: 16,
-        seed,
-        pose_threshold: 0.6,
-        weights_lr_scale: 50.0,
-        ..Settings::default()
     };
     let trainer = Trainer::new(inputs, settings).unwrap();
     assert!(
@@ -735,7 +745,7 @@ fn balanced_poses_differ_by_the_threshold_and_recombined_ones_mix_real_limbs() {
         .collect();
     let mut donors_differ = 0;
     for m in &mixed {
-        assert!(m.recombined);
+        assert_eq!(m.kind, garmentbake::train::poses::PoseKind::Recombined);
         // Every limb chain is one real pose's chain, rotation for rotation.
         let mut sources = Vec::new();
         for &s in &starts {
@@ -837,7 +847,16 @@ fn recombine_adds_training_poses_and_records_them_in_the_model() {
     let out = tmp("recombine.safetensors");
     let r = tiny_train_cli(
         &out,
-        &["--epochs", "1", "--recombine", "2", "--config", "jersey"],
+        &[
+            "--epochs",
+            "1",
+            "--recombine",
+            "2",
+            "--coverage",
+            "0",
+            "--config",
+            "jersey",
+        ],
     );
     let text = String::from_utf8_lossy(&r.stdout);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
@@ -977,4 +996,262 @@ fn clip_at(name: &str, fps: f32) -> garmentbake::rig::SkelAnimation {
     )
     .unwrap()
     .animation
+}
+
+#[test]
+fn patience_stops_when_the_validation_loss_stalls_and_keeps_the_best_epoch() {
+    // A high learning rate makes the tiny skirt's validation loss bounce within a few epochs:
+    // training must stop `patience` epochs after its lowest point, and the model written must
+    // be that epoch's weights (the checkpoint keeps the current ones, for --resume).
+    let _g = serial();
+    let settings = Settings {
+        epochs: 40,
+        seed: 3,
+        learning_rate: 0.1,
+        validate_every: 1,
+        patience: Some(3),
+        ..tiny_settings()
+    };
+    let out = tmp("patience.safetensors");
+    let mut t = tiny_trainer_with(settings.clone());
+    let opts = FitOptions {
+        epochs: 40,
+        out: &out,
+        quiet: true,
+        log: None,
+    };
+    let fitted = fit_every(&mut t, &opts, CheckpointEvery::EPOCH).unwrap();
+    let losses: Vec<f64> = t
+        .info()
+        .history
+        .iter()
+        .map(|e| e.validation_loss.unwrap())
+        .collect();
+    let best = 1
+        + (0..losses.len())
+            .min_by(|&a, &b| losses[a].total_cmp(&losses[b]))
+            .unwrap();
+    eprintln!("validation loss per epoch {losses:?}; best epoch {best}");
+    assert!(
+        fitted.stopped_early.is_some(),
+        "ran all {} epochs",
+        fitted.epochs
+    );
+    assert_eq!(fitted.epochs, best + 3, "stopped 3 epochs after the best");
+    assert_eq!(t.best().unwrap().0, best);
+    let written = file::load(&out, Device::Cpu).unwrap();
+    let info = written.info.pbns().unwrap();
+    assert_eq!(info.training.best_epoch, Some(best));
+    assert_eq!(info.history.len(), fitted.epochs);
+    // The same run stopped by hand after the best epoch has the same weights.
+    let mut again = tiny_trainer_with(Settings {
+        patience: None,
+        ..settings
+    });
+    for _ in 0..best {
+        again.run_epoch_with(|_, _| {}).unwrap();
+    }
+    let garmentbake::models::Model::Pbns(kept) = &written.model else {
+        panic!("a PBNS model")
+    };
+    for ((name, x), (_, y)) in kept
+        .parameters(true)
+        .iter()
+        .zip(again.model().parameters(true))
+    {
+        assert!(
+            x.equal(y),
+            "{name}: the written model is not epoch {best}'s"
+        );
+    }
+    // --patience 0 would stop at once: refused.
+    let r = tiny_train_cli(&tmp("patience0.safetensors"), &["--patience", "0"]);
+    assert_eq!(r.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&r.stderr).contains("--patience"));
+}
+
+#[test]
+fn range_sampled_poses_turn_garment_joints_across_their_widened_ranges() {
+    use garmentbake::train::poses::{pose_set, range_sampled, JointRanges, PoseKind, RANGE_WIDEN};
+    let b = body();
+    let sk = &b.skeleton;
+    let clips = [clip("01_01.bvh"), clip("131_01.bvh")];
+    let j = |name: &str| sk.joint_names.iter().position(|n| n == name).unwrap();
+    let joints = vec![
+        j("LeftUpLeg"),
+        j("RightUpLeg"),
+        j("LeftLeg"),
+        j("RightLeg"),
+        j("Spine"),
+    ];
+    let set = pose_set(&clips, joints.clone(), 0.15, 0.15, 0);
+    let seen = JointRanges::of(&clips, sk.joint_count());
+    let wide = seen.widened(RANGE_WIDEN);
+    let sampled = range_sampled(&set.train, &wide, &joints, 200, 5);
+    assert_eq!(
+        sampled,
+        range_sampled(&set.train, &wide, &joints, 200, 5),
+        "seeded"
+    );
+    let (mut drawn, mut beyond_clips) = (0, 0);
+    for p in &sampled {
+        assert_eq!(p.kind, PoseKind::Sampled);
+        let base = set
+            .train
+            .iter()
+            .find(|r| (r.clip, r.frame) == (p.clip, p.frame))
+            .expect("a real base pose");
+        for k in 0..sk.joint_count() {
+            let (a, r) = (p.local[k].rotation, base.local[k].rotation);
+            if !joints.contains(&k) {
+                assert_eq!(a, r, "{} is no garment joint: kept", sk.joint_names[k]);
+                continue;
+            }
+            if a == r {
+                continue;
+            }
+            drawn += 1;
+            let v = a.scaled_axis();
+            for c in 0..3 {
+                assert!(
+                    (wide.lowest[k][c] - 1e-4..=wide.highest[k][c] + 1e-4).contains(&v[c]),
+                    "{} component {c} = {} outside the widened range",
+                    sk.joint_names[k],
+                    v[c]
+                );
+                beyond_clips += usize::from(v[c] < seen.lowest[k][c] || v[c] > seen.highest[k][c]);
+            }
+        }
+    }
+    // About half of the 5 garment joints are drawn per pose, and some reach past the clips.
+    eprintln!("{drawn} joints drawn, {beyond_clips} components beyond the clips' range");
+    assert!((300..=700).contains(&drawn), "{drawn} of 1000 joint draws");
+    assert!(beyond_clips > 50, "{beyond_clips}");
+}
+
+#[test]
+fn eval_reports_pose_coverage_and_clamps_weights_to_the_trained_range() {
+    use garmentbake::eval::ClipCoverage;
+    let _g = serial();
+    let out = tmp("coverage.safetensors");
+    let r = tiny_train_cli(&out, &["--epochs", "2"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let text = String::from_utf8_lossy(&r.stdout);
+    assert!(
+        text.contains("recombined +") && text.contains("range-sampled"),
+        "{text}"
+    );
+    let file = file::load(&out, Device::Cpu).unwrap();
+    let coverage = file.coverage.clone().expect("training stores its poses");
+    let info = file.info.pbns().unwrap();
+    assert_eq!(coverage.poses.len(), info.training.poses_train);
+    assert!(info.training.poses_sampled > 0);
+    let model = file.pbns().unwrap();
+    // The training clip's frames at training poses are at distance 0.
+    let anim = clip("131_01.bvh");
+    let poses: Vec<_> = (0..anim.frame_count())
+        .map(|f| anim.local_pose(f))
+        .collect();
+    let c = ClipCoverage::of(&coverage, &model.feature_joints, &poses);
+    assert!(
+        c.distance.contains(&0.0),
+        "no training frame found at distance 0"
+    );
+    // Another clip through the CLI: beyond = distance ≥ threshold, within + beyond = all.
+    let r = gb()
+        .args(["eval", "--fps", "5", "--json", "--threads", "1", "--model"])
+        .arg(&out)
+        .arg("--motion")
+        .arg(sample("motions/131_02.bvh"))
+        .arg("--out")
+        .arg(tmp("coverage.pc2"))
+        .output()
+        .unwrap();
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+    let cov = &v["coverage"];
+    let threshold = cov["threshold"].as_f64().unwrap();
+    let distance: Vec<f64> = cov["distance"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|d| d.as_f64().unwrap())
+        .collect();
+    let beyond: Vec<usize> = cov["beyond"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f.as_u64().unwrap() as usize)
+        .collect();
+    assert_eq!(distance.len(), v["frames"].as_u64().unwrap() as usize);
+    for (f, d) in distance.iter().enumerate() {
+        assert_eq!(beyond.contains(&f), *d >= threshold, "frame {f}: {d}");
+    }
+    let frames = |k: &str| cov[k]["frames"].as_u64().unwrap_or(0) as usize;
+    assert_eq!(frames("within") + frames("beyond_range"), distance.len());
+    assert!(
+        !beyond.is_empty(),
+        "131_02 goes beyond 131_01's poses at a 0.8 rad threshold"
+    );
+    // Clamped: on training poses the weights are unchanged, far beyond them within the range.
+    let mut clamped = file::load(&out, Device::Cpu).unwrap();
+    let garmentbake::models::Model::Pbns(m) = &mut clamped.model else {
+        panic!()
+    };
+    m.clamp_weights(&coverage.weight_min, &coverage.weight_max);
+    let bent: Vec<_> = poses[..4]
+        .iter()
+        .map(|p| {
+            let mut p = p.clone();
+            for t in p.iter_mut().skip(1) {
+                t.rotation =
+                    nalgebra::UnitQuaternion::from_scaled_axis(t.rotation.scaled_axis() * 3.0);
+            }
+            p
+        })
+        .collect();
+    let w = |m: &garmentbake::models::Pbns, poses: &[Vec<garmentbake::rig::JointTransform>]| {
+        let batch = m.batch(&body().skeleton, poses, Device::Cpu);
+        tch::no_grad(|| m.coefficients(&batch.features))
+    };
+    let (free, held) = (w(model, &bent), w(m, &bent));
+    let lo = Tensor::from_slice(&coverage.weight_min);
+    let hi = Tensor::from_slice(&coverage.weight_max);
+    let outside = |x: &Tensor| {
+        (x.lt_tensor(&lo).logical_or(&x.gt_tensor(&hi)))
+            .sum(Kind::Int64)
+            .int64_value(&[])
+    };
+    assert!(outside(&free) > 0, "the bent poses must leave the range");
+    assert_eq!(outside(&held), 0);
+    let real_batch: Vec<_> = file_poses(&out);
+    assert!(w(model, &real_batch).equal(&w(m, &real_batch)));
+    // A model without stored coverage cannot clamp: one clear line.
+    let r = gb()
+        .args(["eval", "--clamp-weights", "--model"])
+        .arg(sample("body.glb"))
+        .arg("--motion")
+        .arg(sample("motions/131_02.bvh"))
+        .arg("--out")
+        .arg(tmp("x.pc2"))
+        .output()
+        .unwrap();
+    assert_eq!(r.status.code(), Some(2));
+}
+
+/// The training clip's frames that are training poses of the model at `path` (distance 0).
+fn file_poses(path: &Path) -> Vec<Vec<garmentbake::rig::JointTransform>> {
+    use garmentbake::eval::ClipCoverage;
+    let file = file::load(path, Device::Cpu).unwrap();
+    let coverage = file.coverage.unwrap();
+    let joints = &file.info.pbns().unwrap().feature_joints;
+    let anim = clip("131_01.bvh");
+    let poses: Vec<_> = (0..anim.frame_count())
+        .map(|f| anim.local_pose(f))
+        .collect();
+    let c = ClipCoverage::of(&coverage, joints, &poses);
+    (0..poses.len())
+        .filter(|&f| c.distance[f] == 0.0)
+        .map(|f| poses[f].clone())
+        .collect()
 }
