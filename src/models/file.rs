@@ -49,6 +49,8 @@ pub struct ModelInfo {
 /// What a model kind adds to the description; the tag chooses how the tensors are read.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "lowercase")]
+// One description per model file: the PBNS variant's inline size costs nothing worth a box.
+#[allow(clippy::large_enum_variant)]
 pub enum KindInfo {
     Pbns(PbnsInfo),
     /// Boxed: its seeds, ranges and two histories make it far larger than PBNS's description.

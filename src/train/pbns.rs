@@ -1052,21 +1052,21 @@ fn nearest_body_points(
     bodies: &[PosedBody],
 ) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
     use rayon::prelude::*;
-    let per_pose: Vec<(Vec<[f32; 3]>, Vec<[f32; 3]>)> = x
+    let nearest: Vec<Vec<usize>> = x
         .par_iter()
         .zip(bodies)
         .map(|(frame, body)| {
             frame
                 .iter()
-                .map(|&p| {
-                    let b = body.index.nearest(p).0 as usize;
-                    (body.points[b], body.normals[b])
-                })
-                .unzip()
+                .map(|&p| body.index.nearest(p).0 as usize)
+                .collect()
         })
         .collect();
-    let (points, normals): (Vec<_>, Vec<_>) = per_pose.into_iter().unzip();
-    (points.concat(), normals.concat())
+    nearest
+        .iter()
+        .zip(bodies)
+        .flat_map(|(ids, body)| ids.iter().map(|&b| (body.points[b], body.normals[b])))
+        .unzip()
 }
 
 /// Joints that move the garment, or the body parts it can touch (a long skirt's hem meets the

@@ -1159,7 +1159,7 @@ fn eval_reports_pose_coverage_and_clamps_weights_to_the_trained_range() {
     );
     // Another clip through the CLI: beyond = distance ≥ threshold, within + beyond = all.
     let r = gb()
-        .args(["eval", "--fps", "5", "--json", "--threads", "1", "--model"])
+        .args(["eval", "--fps", "10", "--json", "--threads", "1", "--model"])
         .arg(&out)
         .arg("--motion")
         .arg(sample("motions/131_02.bvh"))
