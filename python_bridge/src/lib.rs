@@ -147,6 +147,7 @@ impl Value<'_> {
 static USD_WRITER: PyOnceLock<Py<PyModule>> = PyOnceLock::new();
 static USD_READER: PyOnceLock<Py<PyModule>> = PyOnceLock::new();
 static USD_VALIDATOR: PyOnceLock<Py<PyModule>> = PyOnceLock::new();
+static USD_REPLAY: PyOnceLock<Py<PyModule>> = PyOnceLock::new();
 
 fn embedded<'py>(
     py: Python<'py>,
@@ -240,6 +241,68 @@ pub fn validate_usd(path: &Path) -> Result<Vec<UsdFinding>, BridgeError> {
         )?;
         let found = module.call_method1("validate", (path.to_string_lossy().into_owned(),))?;
         Ok(found.extract()?)
+    })
+}
+
+/// A USD garment played by usd-core: [`replay_usd`]'s answer.
+#[derive(Clone, Debug)]
+pub struct UsdReplay {
+    /// The mesh prim played, e.g. `/skirt/garment`.
+    pub mesh: String,
+    /// Skinned through UsdSkel (else its time-sampled `points`).
+    pub skinned: bool,
+    /// Time samples of the bound SkelAnimation's joints (skinned) or of `points`.
+    pub samples: usize,
+    /// `[frame][point]`, as usd-core computed them.
+    pub frames: Vec<Vec<[f32; 3]>>,
+}
+
+/// The mesh of the stage at `path` holding one of `counts` points (`garment` when several do),
+/// evaluated by usd-core at frames `0..frames` of the clip played at `fps` (the `clip` variant
+/// named `clip`, or the only one): UsdSkel's BlendShapeQuery and SkinningQuery for a skinned
+/// mesh, the time-sampled points otherwise (python_bridge/src/usd_replay.py). `Ok(Err(reason))`
+/// when the file cannot be played that way.
+pub fn replay_usd(
+    path: &Path,
+    counts: &[usize],
+    clip: &str,
+    fps: f64,
+    frames: usize,
+) -> Result<Result<UsdReplay, String>, BridgeError> {
+    Python::attach(|py| {
+        let module = embedded(
+            py,
+            &USD_REPLAY,
+            include_str!("usd_replay.py"),
+            c"usd_replay.py",
+            c"garmentbake_usd_replay",
+        )?;
+        let path = path.to_string_lossy().into_owned();
+        let got = module.call_method1("replay", (path, counts.to_vec(), clip, fps, frames))?;
+        if let Ok(reason) = got.get_item("error") {
+            return Ok(Err(reason.extract()?));
+        }
+        let points = got.get_item("points")?;
+        let bytes = points.cast::<PyBytes>().map_err(PyErr::from)?.as_bytes();
+        if frames == 0 || bytes.len() % (12 * frames) != 0 {
+            return Ok(Err(format!(
+                "usd-core gave {} bytes of points for {frames} frames",
+                bytes.len()
+            )));
+        }
+        let per_frame = bytes.len() / frames / 12;
+        let point = |b: &[u8]| -> [f32; 3] {
+            [0, 4, 8].map(|o| f32::from_le_bytes(b[o..o + 4].try_into().expect("4 bytes")))
+        };
+        Ok(Ok(UsdReplay {
+            mesh: got.get_item("mesh")?.extract()?,
+            skinned: got.get_item("skinned")?.extract()?,
+            samples: got.get_item("samples")?.extract()?,
+            frames: bytes
+                .chunks_exact(12 * per_frame.max(1))
+                .map(|f| f.chunks_exact(12).map(point).collect())
+                .collect(),
+        }))
     })
 }
 

@@ -6,6 +6,7 @@ use super::Execute;
 use crate::bake::pbns::{bake, BakeOptions, BakeReport, Targets};
 
 use crate::motion::{load_clip, read_maps};
+use crate::validate::Validation;
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
 use std::path::PathBuf;
@@ -39,9 +40,9 @@ pub struct Args {
     /// Add the body mesh on the same skeleton.
     #[arg(long)]
     pub with_body: bool,
-    /// Check what was written as `garmentbake validate` does: its structure, and (glTF) its
-    /// replay against the network on every clip within --tolerance-mm (default 1 mm); exit 1
-    /// when it fails.
+    /// Check what was written as `garmentbake validate` does: its structure, and its replay
+    /// (glTF: as the spec evaluates it; USD: through UsdSkel) against the network on every clip
+    /// within --tolerance-mm (default 1 mm); exit 1 when it fails.
     #[arg(long)]
     pub validate: bool,
     /// Also write a page that plays the bake in a browser (as `garmentbake view FILE.glb --out`).
@@ -59,24 +60,15 @@ pub struct Report {
     pub out: PathBuf,
     pub bytes: u64,
     pub report: BakeReport,
-    /// With --validate: one check per clip (glTF) or one for the file (USD).
+    /// With --validate: one check per clip.
     pub validation: Option<Vec<Validation>>,
     /// With --view: the page and its size in bytes.
     pub view: Option<(PathBuf, u64)>,
 }
 
-/// `validate` on the written file.
-#[derive(Serialize)]
-pub struct Validation {
-    pub clip: Option<String>,
-    pub passed: bool,
-    pub errors: Vec<crate::validate::Problem>,
-    pub replay: Option<crate::validate::replay::ReplayError>,
-}
-
 impl Args {
-    /// `validate` on the file just written: per clip against the network for glTF (USD replay is
-    /// not implemented: its structure once).
+    /// `validate` on the file just written: per clip, its structure and its replay (glTF: our
+    /// evaluation of the spec; USD: UsdSkel's) against the network.
     fn check_written(
         &self,
         model: &crate::models::file::ModelFile,
@@ -85,25 +77,15 @@ impl Args {
     ) -> Result<Vec<Validation>> {
         use crate::validate::{check_file, replay::Reference};
         let tolerance = self.tolerance_mm.map_or(1.0, f64::from);
-        let gltf = exporters::FileKind::of(&self.out) == Some(exporters::FileKind::Gltf);
-        let references: Vec<Option<Reference>> = if gltf {
-            clips
-                .iter()
-                .map(|c| Reference::of(model, c, device).map(Some))
-                .collect::<Result<_>>()?
-        } else {
-            vec![None]
-        };
+        let references: Vec<Option<Reference>> = clips
+            .iter()
+            .map(|c| Reference::of(model, c, device).map(Some))
+            .collect::<Result<_>>()?;
         references
             .iter()
             .map(|r| {
                 let checked = check_file(&self.out, r.as_ref(), tolerance)?;
-                Ok(Validation {
-                    clip: r.as_ref().map(|r| r.clip.clone()),
-                    passed: checked.problems.passed(),
-                    errors: checked.problems.errors,
-                    replay: checked.replay,
-                })
+                Ok(checked.validation(r.as_ref().map(|r| r.clip.clone())))
             })
             .collect()
     }
@@ -190,18 +172,7 @@ impl Execute for Args {
             println!("wrote {} ({:.1} MB)", page.display(), *bytes as f64 / 1e6);
         }
         for v in r.validation.iter().flatten() {
-            let clip = v.clip.as_deref().unwrap_or("structure");
-            let verdict = if v.passed { "passes" } else { "FAILS" };
-            match &v.replay {
-                Some(x) => println!(
-                    "validate {clip}: {verdict}; replay max {:.4} mm, mean {:.4} mm, p99 {:.4} mm",
-                    x.max_mm, x.mean_mm, x.p99_mm
-                ),
-                None => println!("validate {clip}: {verdict}"),
-            }
-            for e in &v.errors {
-                println!("  error {}: {}", e.at, e.message);
-            }
+            v.print();
         }
     }
 

@@ -38,8 +38,9 @@ pub struct Args {
     /// Body to collide with (default: the one stored in the model); must have the same skeleton.
     #[arg(long)]
     pub body: Option<PathBuf>,
-    /// Output point cache of the garment, one sample per frame: .pc2 (start frame 0), or
-    /// .usda/.usdc/.usdz (a Mesh with time-sampled points and extent).
+    /// Output point cache of the garment, one sample per frame: .pc2 (start frame 0), .mdd
+    /// (Lightwave's, frame times f / fps), or .usda/.usdc/.usdz (a Mesh with time-sampled points
+    /// and extent).
     #[arg(long)]
     pub out: PathBuf,
     /// Also write the posed body as a point cache (same formats).

@@ -10,6 +10,7 @@ use crate::rig::weights::smooth_garment_skin;
 use crate::rig::SkelAnimation;
 use crate::rollout::{for_model, FrameTiming, Init, Settings};
 use crate::simulate::stats::{self, FrameStats, Series, Summary};
+use crate::validate::{check_file, replay::Reference, Validation};
 use anyhow::{bail, Context, Result};
 use exporters::FileKind;
 use serde::Serialize;
@@ -69,6 +70,11 @@ pub struct Args {
     /// --reference, the simulation beside it and error colours against it.
     #[arg(long, value_name = "PAGE.html")]
     pub view: Option<PathBuf>,
+    /// Check what was written as `garmentbake validate` does: its structure and (a point cache)
+    /// that it plays the roll-out just computed within --tolerance-mm at every frame; exit 1
+    /// when it fails.
+    #[arg(long)]
+    pub validate: bool,
     /// Skip the per-frame collision fix.
     #[arg(long)]
     pub no_collision_fix: bool,
@@ -162,6 +168,8 @@ pub struct Report {
     pub body_out: Option<PathBuf>,
     /// With --view: the page and its size in bytes.
     pub view: Option<(PathBuf, u64)>,
+    /// With --validate: the written file against the roll-out.
+    pub validation: Option<Validation>,
 }
 
 impl Execute for Args {
@@ -260,6 +268,22 @@ impl Execute for Args {
             write_cache(&self.out, &file.garment, &rollout.frames, fps)?;
             None
         };
+        // A point cache holds the frames themselves; a glTF's vertices are the bake's (structure).
+        let validation = self
+            .validate
+            .then(|| {
+                let written = (kind != Some(FileKind::Gltf)).then(|| {
+                    Reference::of_frames(
+                        "roll-out",
+                        rollout.frames.clone(),
+                        fps,
+                        file.garment.triangles.clone(),
+                    )
+                });
+                check_file(&self.out, written.as_ref(), f64::from(self.tolerance_mm))
+                    .map(|c| c.validation(Some("roll-out".into())))
+            })
+            .transpose()?;
         if let Some(path) = &self.body_out {
             let bodies: Vec<Vec<[f32; 3]>> = poses
                 .iter()
@@ -302,6 +326,7 @@ impl Execute for Args {
             baked,
             body_out: self.body_out.clone(),
             view,
+            validation,
         })
     }
 
@@ -368,6 +393,13 @@ impl Execute for Args {
         if let Some((page, bytes)) = &r.view {
             println!("wrote {} ({:.1} MB)", page.display(), *bytes as f64 / 1e6);
         }
+        if let Some(v) = &r.validation {
+            v.print();
+        }
+    }
+
+    fn exit_code(r: &Report) -> i32 {
+        i32::from(r.validation.as_ref().is_some_and(|v| !v.passed))
     }
 }
 

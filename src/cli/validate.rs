@@ -26,9 +26,12 @@ use std::path::PathBuf;
 /// frame times strictly increasing and evenly spaced (their spacing is the rate).
 ///
 /// Replay, with --model and --motion: the file is evaluated as its spec says (glTF: morph
-/// targets, then skinning, at every frame of the clip's animation; caches: read back, frame
-/// count and rate checked against the clip) and compared with the model's own evaluation; max / mean / p99 error in mm, the worst frame and
-/// vertex; the file fails above --tolerance-mm. --png draws the worst frame coloured by error.
+/// targets, then skinning, at every frame of the clip's animation, by our evaluator; USD: by
+/// usd-core's UsdSkel blend shape and skinning queries; caches: read back, frame count and rate
+/// checked against the clip) and compared with the PBNS model's own evaluation; max / mean / p99
+/// error in mm, the worst frame and vertex; the file fails above --tolerance-mm. --png draws the
+/// worst frame coloured by error. With --reference CACHE instead, the file is compared with that
+/// cache (dynamic models: a roll-out; `rollout --validate` does it on what it writes).
 ///
 /// Exit code: 0 the file passes, 1 it fails (every problem is listed, located by JSON
 /// pointer), 2 it could not be read at all (missing file, unknown extension, bad options).
@@ -46,9 +49,15 @@ pub struct Args {
     /// Joint-name map(s) (TOML) for the clip, as given to bake.
     #[arg(long = "map")]
     pub maps: Vec<PathBuf>,
-    /// The rate the file was baked at (--fps of bake).
+    /// The rate the file was baked at (--fps of bake); with --reference, the caches' rate.
     #[arg(long)]
     pub fps: Option<f32>,
+    /// A point cache (.pc2 / .mdd) the file must play frame for frame, vertex for vertex,
+    /// instead of --model: a dynamic model's roll-out (its garment depends on where the roll-out
+    /// started and on the collision fix, so it is compared with a cache, not re-run) or a
+    /// simulation.
+    #[arg(long, conflicts_with = "model")]
+    pub reference: Option<PathBuf>,
     /// Largest replay error allowed, in millimetres.
     #[arg(long, default_value_t = 1.0)]
     pub tolerance_mm: f64,
@@ -77,10 +86,19 @@ pub struct Report {
 impl Args {
     /// The model's evaluation of the clip, when --model and --motion are given.
     fn reference(&self) -> Result<Option<Reference>> {
-        let (Some(model), Some(motion)) = (&self.model, &self.motion) else {
+        if let Some(cache) = &self.reference {
+            return Reference::from_cache(cache, self.fps).map(Some);
+        }
+        let (Some(path), Some(motion)) = (&self.model, &self.motion) else {
             return Ok(None);
         };
-        let (model, device) = self.compute.load_model(model)?;
+        let (model, device) = self.compute.load_model(path)?;
+        if model.pbns().is_err() {
+            bail!(
+                "{}: a dynamic model's garment depends on its roll-out (start, collision fix): validate the roll-out's cache with --reference ROLLOUT.pc2, or run `rollout --validate`",
+                path.display()
+            );
+        }
         let clips = ClipArgs {
             motions: vec![motion.clone()],
             maps: self.maps.clone(),
@@ -131,7 +149,7 @@ impl Execute for Args {
         );
         if let Some(x) = &r.replay {
             println!(
-                "replay vs model on {} ({} frames, {} vertices): max {:.4} mm (frame {}, vertex {}), mean {:.4} mm, p99 {:.4} mm; tolerance {} mm",
+                "replay on {} ({} frames, {} vertices): max {:.4} mm (frame {}, vertex {}), mean {:.4} mm, p99 {:.4} mm; tolerance {} mm",
                 x.clip, x.frames, x.vertices, x.max_mm, x.worst_frame, x.worst_vertex, x.mean_mm, x.p99_mm, x.tolerance_mm
             );
         }

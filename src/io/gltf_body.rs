@@ -16,25 +16,40 @@ pub struct BodyError {
 }
 
 pub fn read_body(path: &Path) -> Result<Body, BodyError> {
-    let fail = |reason: String| BodyError {
+    let (doc, buffers, _) = gltf::import(path)
+        .map_err(|e| body_error(path, format!("not a readable glTF file ({e})")))?;
+    body_of(&doc, &buffers).map_err(|reason| body_error(path, reason))
+}
+
+/// The body in a GLB (or a self-contained glTF) held in memory; `source` names it in errors.
+pub fn parse_body(bytes: &[u8], source: &Path) -> Result<Body, BodyError> {
+    let (doc, buffers, _) = gltf::import_slice(bytes)
+        .map_err(|e| body_error(source, format!("not a readable glTF file ({e})")))?;
+    body_of(&doc, &buffers).map_err(|reason| body_error(source, reason))
+}
+
+fn body_error(path: &Path, reason: String) -> BodyError {
+    BodyError {
         path: path.display().to_string(),
         reason,
-    };
-    let (doc, buffers, _) =
-        gltf::import(path).map_err(|e| fail(format!("not a readable glTF file ({e})")))?;
+    }
+}
+
+/// The first skinned mesh node of an imported document, as a Body.
+fn body_of(doc: &gltf::Document, buffers: &[gltf::buffer::Data]) -> Result<Body, String> {
     let node = doc
         .nodes()
         .find(|n| n.mesh().is_some() && n.skin().is_some())
         .ok_or_else(|| {
-            fail(format!(
+            format!(
                 "no skinned mesh ({} meshes, {} skins); export the body with its armature",
                 doc.meshes().len(),
                 doc.skins().len()
-            ))
+            )
         })?;
     let (mesh, skin) = (node.mesh().expect("checked"), node.skin().expect("checked"));
-    let (skeleton, remap) = read_skeleton(&doc, &skin, &buffers).map_err(&fail)?;
-    let (tri, normals, skin) = read_mesh(&mesh, &buffers, &remap).map_err(&fail)?;
+    let (skeleton, remap) = read_skeleton(doc, &skin, buffers)?;
+    let (tri, normals, skin) = read_mesh(&mesh, buffers, &remap)?;
     let name = node.name().or(mesh.name()).unwrap_or("body").to_string();
     Ok(Body {
         name,

@@ -150,8 +150,8 @@ fn finite(frames: &[Vec<[f32; 3]>], p: &mut Problems) {
     }
 }
 
-/// The cache's length and rate against the clip it should play: same frame count; for MDD, the
-/// same rate.
+/// The cache's length and rate against the clip (or reference cache) it should play: same frame
+/// count; for MDD, the same rate.
 pub fn check_against_clip(
     cache: &Cache,
     frames: usize,
@@ -163,21 +163,24 @@ pub fn check_against_clip(
         p.error(
             "header",
             format!(
-                "{} points per frame, the model's garment has {vertices} vertices",
+                "{} points per frame, the reference has {vertices} (another garment?)",
                 cache.points
             ),
         );
     }
     if cache.frames.len() != frames {
+        let reference = if fps > 0.0 {
+            format!("the clip at {fps} fps has {frames} (a wrong frame count or another --fps)")
+        } else {
+            format!("the reference has {frames}")
+        };
         p.error(
             "header",
-            format!(
-                "{} frames, the clip at {fps} fps has {frames} (a wrong frame count or another --fps)",
-                cache.frames.len()
-            ),
+            format!("{} frames, {reference}", cache.frames.len()),
         );
     }
-    if let Some(rate) = cache.fps {
+    // A rate of 0: unknown (a PC2 reference without --fps), nothing to compare with.
+    if let Some(rate) = cache.fps.filter(|_| fps > 0.0) {
         if (rate / fps - 1.0).abs() > 1e-3 {
             p.error(
                 "times",

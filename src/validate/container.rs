@@ -189,6 +189,11 @@ fn resolve_uri(gltf: &Path, uri: &str, at: &str, problems: &mut Problems) -> Opt
         .parent()
         .unwrap_or(Path::new("."))
         .join(percent_decode(uri));
+    // A device or a pipe (`../../dev/zero`) would never end: only plain files hold buffers.
+    if file.metadata().is_ok_and(|m| !m.is_file()) {
+        problems.error(at, format!("{} is not a plain file", file.display()));
+        return None;
+    }
     match std::fs::read(&file) {
         Ok(data) => Some(data),
         Err(e) => {

@@ -112,6 +112,45 @@ pub struct Checked {
     pub replay: Option<ReplayError>,
 }
 
+/// `validate` run by the command that just wrote the file (`bake --validate`, `rollout
+/// --validate`): the verdict, the errors and the replay, per clip.
+#[derive(Serialize)]
+pub struct Validation {
+    pub clip: Option<String>,
+    pub passed: bool,
+    pub errors: Vec<Problem>,
+    pub replay: Option<ReplayError>,
+}
+
+impl Checked {
+    pub fn validation(self, clip: Option<String>) -> Validation {
+        Validation {
+            clip,
+            passed: self.problems.passed(),
+            errors: self.problems.errors,
+            replay: self.replay,
+        }
+    }
+}
+
+impl Validation {
+    /// The verdict in one line, then one line per error.
+    pub fn print(&self) {
+        let clip = self.clip.as_deref().unwrap_or("structure");
+        let verdict = if self.passed { "passes" } else { "FAILS" };
+        match &self.replay {
+            Some(x) => println!(
+                "validate {clip}: {verdict}; replay max {:.4} mm, mean {:.4} mm, p99 {:.4} mm",
+                x.max_mm, x.mean_mm, x.p99_mm
+            ),
+            None => println!("validate {clip}: {verdict}"),
+        }
+        for e in &self.errors {
+            println!("  error {}: {}", e.at, e.message);
+        }
+    }
+}
+
 /// Checks the file at `path`: its structure, then (with `reference`) its replay against the
 /// model; a replay above `tolerance_mm` is an error. `Err` only when it cannot be read at all.
 pub fn check_file(
@@ -126,10 +165,12 @@ pub fn check_file(
         FileKind::Gltf => gltf(path, &bytes, reference, tolerance_mm, &mut p),
         FileKind::Usd => {
             usd::check_usd(path, &mut p)?;
-            if reference.is_some() {
-                p.warning("replay", "not implemented for USD yet: structure only");
+            match reference {
+                Some(reference) if p.passed() => usd::replay_usd(path, reference, tolerance_mm)
+                    .map_err(|reason| p.error("replay", reason))
+                    .ok(),
+                _ => None,
             }
-            None
         }
         _ => point_cache(kind, &bytes, reference, tolerance_mm, &mut p),
     };

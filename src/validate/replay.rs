@@ -42,6 +42,52 @@ impl Reference {
         })
     }
 
+    /// Frames the file must play vertex for vertex (a roll-out just computed, or a cache), at
+    /// `fps` (0: unknown, the file's own rate is taken); `triangles` for the picture.
+    pub fn of_frames(
+        name: &str,
+        frames: Vec<Vec<[f32; 3]>>,
+        fps: f32,
+        triangles: Vec<[u32; 3]>,
+    ) -> Reference {
+        let points = frames.first().map_or(0, Vec::len) as u32;
+        Reference {
+            clip: name.to_string(),
+            fps,
+            frames,
+            triangles,
+            baked_vertex: (0..points).collect(),
+        }
+    }
+
+    /// A point cache (.pc2 / .mdd, checked as `validate` checks one) as the reference: a
+    /// dynamic model's roll-out or a simulation. Its rate: `fps`, else the MDD's frame times.
+    pub fn from_cache(path: &Path, fps: Option<f32>) -> Result<Reference> {
+        let bytes =
+            std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+        let mut problems = super::Problems::default();
+        let cache = match exporters::FileKind::of(path) {
+            Some(exporters::FileKind::Pc2) => super::cache::check_pc2(&bytes, &mut problems),
+            Some(exporters::FileKind::Mdd) => super::cache::check_mdd(&bytes, &mut problems),
+            _ => anyhow::bail!(
+                "{}: a reference must be a point cache (.pc2 or .mdd)",
+                path.display()
+            ),
+        };
+        match (cache, problems.errors.first()) {
+            (Some(cache), None) => {
+                let fps = fps.or(cache.fps.map(|f| f as f32)).unwrap_or(0.0);
+                let name = path.file_name().unwrap_or_default().to_string_lossy();
+                Ok(Reference::of_frames(&name, cache.frames, fps, Vec::new()))
+            }
+            (_, problem) => anyhow::bail!(
+                "{}: the reference is not a sound point cache: {}",
+                path.display(),
+                problem.map_or("unreadable", |p| p.message.as_str())
+            ),
+        }
+    }
+
     pub fn vertex_count(&self) -> usize {
         self.frames.first().map_or(0, Vec::len)
     }

@@ -309,12 +309,26 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
     assert!(v["one_step_mm"].as_f64().unwrap() < 2.0 * f + 1.0, "{v}");
     gltf_replays_the_roll_out(&dir, &model, &sim, &out);
     // A wide clearance makes the fix fire on every frame; it must cut the collision loss.
+    let fixed_out = dir.join("fixed.pc2");
     let fixed = roll_out(
         &model,
         &sim,
-        &dir.join("fixed.pc2"),
-        &["--collision-margin-mm", "30"],
+        &fixed_out,
+        &["--collision-margin-mm", "30", "--validate"],
     );
+    // --validate: the written cache is sound and plays the roll-out just computed.
+    assert_eq!(fixed["validation"]["passed"], true, "{fixed}");
+    assert_eq!(fixed["validation"]["replay"]["max_mm"], 0.0, "{fixed}");
+    // validate --reference: the roll-out without the fix is not this one (error in mm).
+    let o = garmentbake_in_root(&[
+        "validate",
+        fixed_out.to_str().unwrap(),
+        "--reference",
+        out.to_str().unwrap(),
+    ]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(o.status.code(), Some(1), "{text}");
+    assert!(text.contains("exceeds the tolerance of 1 mm"), "{text}");
     let (before, after) = (
         fixed["collision_loss_before_mm"].as_f64().unwrap(),
         fixed["collision_loss_after_mm"].as_f64().unwrap(),

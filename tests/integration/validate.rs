@@ -845,9 +845,13 @@ const FRAMES: usize = 42;
 #[test]
 fn point_caches() {
     let dir = out_dir("validate_caches");
-    let (pc2, mdd) = (dir.join("eval.pc2"), dir.join("eval.mdd"));
+    let (pc2, mdd, usdc) = (
+        dir.join("eval.pc2"),
+        dir.join("eval.mdd"),
+        dir.join("eval.usdc"),
+    );
     // 131_02 at 4 fps (42 frames): eval's metrics are the slow part, the checks need few frames.
-    for out in [&pc2, &mdd] {
+    for out in [&pc2, &mdd, &usdc] {
         garmentbake_ok(&[
             "eval",
             "--model",
@@ -862,8 +866,8 @@ fn point_caches() {
             out.to_str().unwrap(),
         ]);
     }
-    // eval's caches pass, and replay the network exactly.
-    for file in [&pc2, &mdd] {
+    // eval's caches pass, and replay the network exactly (the USD one read back by usd-core).
+    for file in [&pc2, &mdd, &usdc] {
         let (code, report) = validate_against_model(file, "4", &[]);
         assert_eq!(code, Some(0), "{report}");
         assert_eq!(report["replay"]["frames"], FRAMES);
@@ -901,6 +905,22 @@ fn point_caches() {
         first_error(code, &report).contains("point 3 is not finite"),
         "{report}"
     );
+    // A cache against a reference cache (how a dynamic model's roll-out is checked): eval's MDD
+    // plays its PC2 exactly; one point moved by 2 mm is found, in mm, at its frame and vertex.
+    let reference = ["--reference", pc2.to_str().unwrap()];
+    let (code, report) = validate_json(&mdd, &reference);
+    assert_eq!(code, Some(0), "{report}");
+    assert_eq!(report["replay"]["frames"], FRAMES);
+    assert_eq!(report["replay"]["max_mm"], 0.0, "{report}");
+    let mut moved = bytes.clone();
+    let at = 8 + 4 * frames + 12 * (points * 9 + 11);
+    let x = f32::from_be_bytes(moved[at..at + 4].try_into().unwrap()) + 0.002;
+    moved[at..at + 4].copy_from_slice(&x.to_be_bytes());
+    let (code, report) = validate_json(&broken("moved.mdd", moved), &reference);
+    let e = first_error(code, &report);
+    assert!(e.contains("(frame 9, vertex 11)"), "{e}");
+    let max = report["replay"]["max_mm"].as_f64().unwrap();
+    assert!((max - 2.0).abs() < 1e-3, "{report}");
     // Consistent files that do not play the clip: one frame short, and times at 25 fps.
     let mut short = bytes.clone();
     short[..4].copy_from_slice(&(frames as i32 - 1).to_be_bytes());
@@ -908,6 +928,11 @@ fn point_caches() {
     short.truncate(short.len() - 12 * points);
     let (code, report) = validate_json(&broken("short.mdd", short.clone()), &[]);
     assert_eq!(code, Some(0), "structurally sound: {report}");
+    let (code, report) = validate_json(&dir.join("short.mdd"), &reference);
+    assert!(
+        first_error(code, &report).contains("41 frames, the reference has 42"),
+        "{report}"
+    );
     let (code, report) = validate_against_model(&dir.join("short.mdd"), "4", &[]);
     assert!(first_error(code, &report).contains("41 frames, the clip at 4 fps has 42"));
     let mut slow = bytes.clone();
@@ -959,22 +984,52 @@ fn point_caches() {
 fn usd_files() {
     let dir = out_dir("validate_usd");
     let baked = bake(&dir, "skirt.usda", &["--max-targets", "8", "--validate"]);
-    let posed = dir.join("pose.usdc");
-    garmentbake_ok(&[
-        "pose",
-        "--body",
-        sample("body.glb").to_str().unwrap(),
-        "--motion",
-        sample("motions/131_01.bvh").to_str().unwrap(),
-        "--fps",
-        "10",
-        "--out",
-        posed.to_str().unwrap(),
-    ]);
-    for file in [&baked, &posed] {
+    let (posed, posed_glb) = (dir.join("pose.usdc"), dir.join("pose.glb"));
+    for out in [&posed, &posed_glb] {
+        garmentbake_ok(&[
+            "pose",
+            "--body",
+            sample("body.glb").to_str().unwrap(),
+            "--motion",
+            sample("motions/131_01.bvh").to_str().unwrap(),
+            "--fps",
+            "10",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+    }
+    for file in [&baked, &posed, &posed_glb] {
         let (code, report) = validate_json(file, &[]);
         assert_eq!(code, Some(0), "{report}");
     }
+    // Replayed through UsdSkel (usd-core's blend shape and skinning queries) at every frame.
+    let (code, good) = validate_against_model(&baked, "30", &[]);
+    assert_eq!(code, Some(0), "{good}");
+    let r = &good["replay"];
+    assert_eq!(r["frames"], 312);
+    assert!(r["max_mm"].as_f64().unwrap() < 0.05, "{r}");
+    // Every blend shape's offsets ×1.05, rewritten by usd-core: still a sound file, but off the
+    // network by 5 % of the morph displacement.
+    let scaled = dir.join("shapes_x1.05.usda");
+    run_ok(
+        std::process::Command::new(root().join(".venv/bin/python"))
+            .args(["-c", SCALE_BLEND_SHAPES])
+            .args([&baked, &scaled])
+            .arg("1.05"),
+    );
+    let (code, report) = validate_json(&scaled, &[]);
+    assert_eq!(code, Some(0), "structurally sound: {report}");
+    let (code, bad) = validate_against_model(&scaled, "30", &[]);
+    let e = first_error(code, &bad);
+    let max = bad["replay"]["max_mm"].as_f64().unwrap();
+    assert!(max > 0.2, "{bad}");
+    assert!(e.contains(&format!("{max:.3} mm")), "{e}");
+    // Played at another rate, the file does not match the clip's frames.
+    let (code, wrong) = validate_against_model(&baked, "10", &[]);
+    assert!(
+        first_error(code, &wrong).contains("312 time samples, the clip 104 frames"),
+        "{wrong}"
+    );
     let text = std::fs::read_to_string(&baked).unwrap();
     let garbled = dir.join("garbled.usda");
     std::fs::write(&garbled, &text[..text.len() / 3]).unwrap();
@@ -992,3 +1047,15 @@ fn usd_files() {
         "{e}"
     );
 }
+
+/// usd-core rewrites a USD with every BlendShape's offsets scaled: argv = SRC DST SCALE.
+const SCALE_BLEND_SHAPES: &str = "
+import sys
+from pxr import Usd, UsdSkel, Vt
+stage = Usd.Stage.Open(sys.argv[1])
+for prim in stage.Traverse():
+    if prim.IsA(UsdSkel.BlendShape):
+        attr = UsdSkel.BlendShape(prim).GetOffsetsAttr()
+        attr.Set(Vt.Vec3fArray([v * float(sys.argv[3]) for v in attr.Get()]))
+stage.GetRootLayer().Export(sys.argv[2])
+";
