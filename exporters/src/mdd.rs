@@ -77,8 +77,9 @@ pub fn read(bytes: &[u8]) -> Result<Mdd, MddError> {
         points: points as usize,
     };
     let per_frame = 4 + 12 * header.points;
-    let want = (HEADER_LEN as u64) + header.frames as u64 * per_frame as u64;
-    if bytes.len() as u64 != want {
+    // In u128: two i32 counts from a corrupt header overflow u64 (found by fuzzing).
+    let want = HEADER_LEN as u128 + header.frames as u128 * per_frame as u128;
+    if bytes.len() as u128 != want {
         let data = bytes.len() - HEADER_LEN;
         let holds = if data.is_multiple_of(per_frame) {
             format!("the data holds {} frames", data / per_frame)

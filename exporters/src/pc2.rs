@@ -89,8 +89,9 @@ pub fn read(bytes: &[u8]) -> Result<(Header, Frames), Pc2Error> {
         sample_rate: f32_at(24),
         samples: samples as usize,
     };
-    let want = HEADER_LEN + 12 * header.points * header.samples;
-    if bytes.len() != want {
+    // In u128: two i32 counts from a corrupt header overflow usize (found by fuzzing).
+    let want = HEADER_LEN as u128 + 12 * header.points as u128 * header.samples as u128;
+    if bytes.len() as u128 != want {
         return Err(Pc2Error::Format(format!(
             "{} bytes, the header announces {want}",
             bytes.len()

@@ -5,6 +5,7 @@ use crate::body::Body;
 use crate::geometry::mesh::{FaceVaryingUv, TriMesh};
 use crate::rig::skeleton::topological_order;
 use crate::rig::{JointTransform, Skeleton, Skin};
+use gltf::accessor::{DataType, Dimensions};
 use nalgebra::{Matrix4, Quaternion, UnitQuaternion, Vector3};
 use std::path::Path;
 
@@ -16,16 +17,53 @@ pub struct BodyError {
 }
 
 pub fn read_body(path: &Path) -> Result<Body, BodyError> {
-    let (doc, buffers, _) = gltf::import(path)
-        .map_err(|e| body_error(path, format!("not a readable glTF file ({e})")))?;
-    body_of(&doc, &buffers).map_err(|reason| body_error(path, reason))
+    let bytes = std::fs::read(path).map_err(|e| body_error(path, format!("cannot read ({e})")))?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    import(&bytes, Some(base))
+        .and_then(|(doc, buffers)| body_of(&doc, &buffers))
+        .map_err(|reason| body_error(path, reason))
 }
 
 /// The body in a GLB (or a self-contained glTF) held in memory; `source` names it in errors.
 pub fn parse_body(bytes: &[u8], source: &Path) -> Result<Body, BodyError> {
-    let (doc, buffers, _) = gltf::import_slice(bytes)
-        .map_err(|e| body_error(source, format!("not a readable glTF file ({e})")))?;
-    body_of(&doc, &buffers).map_err(|reason| body_error(source, reason))
+    import(bytes, None)
+        .and_then(|(doc, buffers)| body_of(&doc, &buffers))
+        .map_err(|reason| body_error(source, reason))
+}
+
+/// The document and its buffers (external ones beside `base`; none without it). Images are not
+/// loaded: a body needs none.
+fn import(
+    bytes: &[u8],
+    base: Option<&Path>,
+) -> Result<(gltf::Document, Vec<gltf::buffer::Data>), String> {
+    let unreadable = |e: gltf::Error| format!("not a readable glTF file ({e})");
+    let gltf::Gltf { document, blob } =
+        gltf::Gltf::from_slice_without_validation(bytes).map_err(unreadable)?;
+    let json = document.into_json();
+    if let Some(problem) = dangling_position(&json) {
+        return Err(format!("not a readable glTF file ({problem})"));
+    }
+    let document = gltf::Document::from_json(json).map_err(unreadable)?;
+    let buffers = gltf::import_buffers(&document, base, blob).map_err(unreadable)?;
+    Ok((document, buffers))
+}
+
+/// A primitive whose POSITION names no accessor. gltf-json's own validation looks that accessor
+/// up before checking the index (and panics, found by fuzzing): check it first.
+pub fn dangling_position(root: &gltf::json::Root) -> Option<String> {
+    let position = gltf::json::validation::Checked::Valid(gltf::Semantic::Positions);
+    root.meshes.iter().enumerate().find_map(|(m, mesh)| {
+        mesh.primitives.iter().enumerate().find_map(|(p, prim)| {
+            let a = prim.attributes.get(&position)?.value();
+            (a >= root.accessors.len()).then(|| {
+                format!(
+                    "/meshes/{m}/primitives/{p}/attributes/POSITION: accessor {a} does not exist ({} accessors)",
+                    root.accessors.len()
+                )
+            })
+        })
+    })
 }
 
 fn body_error(path: &Path, reason: String) -> BodyError {
@@ -87,6 +125,14 @@ fn read_skeleton(
             None
         })
         .collect();
+    if let Some(a) = skin.inverse_bind_matrices() {
+        expect_format(
+            &a,
+            "inverseBindMatrices",
+            &[DataType::F32],
+            Dimensions::Mat4,
+        )?;
+    }
     let ibm: Vec<Matrix4<f32>> = match skin
         .reader(|b| Some(&buffers[b.index()]))
         .read_inverse_bind_matrices()
@@ -94,6 +140,13 @@ fn read_skeleton(
         Some(it) => it.map(|m| Matrix4::from_fn(|r, c| m[c][r])).collect(),
         None => vec![Matrix4::identity(); joints.len()],
     };
+    if ibm.len() != joints.len() {
+        return Err(format!(
+            "{} inverse bind matrices for the skin's {} joints",
+            ibm.len(),
+            joints.len()
+        ));
+    }
     let order = topological_order(&parents).ok_or("the skin's joint hierarchy has a cycle")?;
     let mut remap = vec![0; joints.len()];
     for (new, &old) in order.iter().enumerate() {
@@ -145,6 +198,7 @@ fn read_mesh(
         .primitives()
         .filter(|p| p.mode() == gltf::mesh::Mode::Triangles)
     {
+        check_formats(&prim)?;
         let reader = prim.reader(|b| Some(&buffers[b.index()]));
         let base = positions.len() as u32;
         let pos: Vec<[f32; 3]> = reader
@@ -154,12 +208,15 @@ fn read_mesh(
         let n = pos.len();
         positions.extend(pos);
         let nrm: Option<Vec<[f32; 3]>> = reader.read_normals().map(|it| it.collect());
-        normals.extend(nrm.unwrap_or_else(|| vec![[0.0; 3]; n]));
+        normals.extend(same_count(nrm, n, "NORMAL")?.unwrap_or_else(|| vec![[0.0; 3]; n]));
         let uv: Option<Vec<[f32; 2]>> = reader.read_tex_coords(0).map(|t| t.into_f32().collect());
-        uvs.extend(uv.unwrap_or_else(|| vec![[0.0; 2]; n]));
+        uvs.extend(same_count(uv, n, "TEXCOORD_0")?.unwrap_or_else(|| vec![[0.0; 2]; n]));
         match reader.read_indices() {
             Some(idx) => {
                 let idx: Vec<u32> = idx.into_u32().collect();
+                if let Some(i) = idx.iter().find(|&&i| i as usize >= n) {
+                    return Err(format!("index {i} past the primitive's {n} vertices"));
+                }
                 triangles.extend(
                     idx.chunks_exact(3)
                         .map(|t| [t[0] + base, t[1] + base, t[2] + base]),
@@ -175,6 +232,11 @@ fn read_mesh(
                 break;
             };
             for (v, (j, w)) in j.into_u16().zip(w.into_f32()).enumerate() {
+                let Some(influences) = vertex_influences.get_mut(v) else {
+                    return Err(format!(
+                        "JOINTS_{set} has more elements than POSITION ({n})"
+                    ));
+                };
                 for k in 0..4 {
                     let slot = j[k] as usize;
                     if w[k] > 0.0 {
@@ -182,7 +244,7 @@ fn read_mesh(
                             "JOINTS_{set} refers to joint {slot}, the skin has {}",
                             remap.len()
                         ))?;
-                        vertex_influences[v].push((joint as u16, w[k]));
+                        influences.push((joint as u16, w[k]));
                     }
                 }
             }
@@ -210,4 +272,51 @@ fn read_mesh(
         normals,
         skin,
     ))
+}
+
+/// The formats the gltf crate's typed readers take (they panic on any other): each attribute
+/// this reader uses, and the indices, are checked before reading.
+fn check_formats(prim: &gltf::Primitive) -> Result<(), String> {
+    use gltf::Semantic;
+    use DataType::{F32, U16, U32, U8};
+    for (semantic, accessor) in prim.attributes() {
+        let (name, types, dimensions): (_, &[DataType], _) = match semantic {
+            Semantic::Positions => ("POSITION", &[F32], Dimensions::Vec3),
+            Semantic::Normals => ("NORMAL", &[F32], Dimensions::Vec3),
+            Semantic::TexCoords(_) => ("TEXCOORD", &[F32, U8, U16], Dimensions::Vec2),
+            Semantic::Joints(_) => ("JOINTS", &[U8, U16], Dimensions::Vec4),
+            Semantic::Weights(_) => ("WEIGHTS", &[F32, U8, U16], Dimensions::Vec4),
+            _ => continue,
+        };
+        expect_format(&accessor, name, types, dimensions)?;
+    }
+    match prim.indices() {
+        Some(a) => expect_format(&a, "indices", &[U8, U16, U32], Dimensions::Scalar),
+        None => Ok(()),
+    }
+}
+
+fn expect_format(
+    accessor: &gltf::Accessor,
+    what: &str,
+    types: &[DataType],
+    dimensions: Dimensions,
+) -> Result<(), String> {
+    if types.contains(&accessor.data_type()) && accessor.dimensions() == dimensions {
+        return Ok(());
+    }
+    Err(format!(
+        "{what} accessor {} is {:?} {:?}, expected {dimensions:?} of {types:?}",
+        accessor.index(),
+        accessor.data_type(),
+        accessor.dimensions()
+    ))
+}
+
+/// An optional per-vertex attribute, which must have one element per vertex.
+fn same_count<T>(values: Option<Vec<T>>, n: usize, what: &str) -> Result<Option<Vec<T>>, String> {
+    match values {
+        Some(v) if v.len() != n => Err(format!("{what} has {} elements, POSITION {n}", v.len())),
+        v => Ok(v),
+    }
 }

@@ -15,7 +15,7 @@ pub struct Cache {
 /// Checks a PC2 file; its frames when the layout is sound.
 pub fn check_pc2(bytes: &[u8], p: &mut Problems) -> Option<Cache> {
     if let Some((want, samples, points)) = announced_pc2(bytes) {
-        if (bytes.len() as u64) < want {
+        if (bytes.len() as u128) < want {
             p.error(
                 "header",
                 format!(
@@ -66,15 +66,16 @@ pub fn check_pc2(bytes: &[u8], p: &mut Problems) -> Option<Cache> {
 }
 
 /// The size a PC2 header announces, with its sample and point counts (None: no PC2 header).
-fn announced_pc2(bytes: &[u8]) -> Option<(u64, u64, u64)> {
+/// In u128: two i32 counts overflow u64.
+fn announced_pc2(bytes: &[u8]) -> Option<(u128, u128, u128)> {
     if bytes.len() < pc2::HEADER_LEN || &bytes[..12] != pc2::MAGIC {
         return None;
     }
     let count =
-        |o: usize| i32::from_le_bytes(bytes[o..o + 4].try_into().expect("4 bytes")).max(0) as u64;
+        |o: usize| i32::from_le_bytes(bytes[o..o + 4].try_into().expect("4 bytes")).max(0) as u128;
     let (points, samples) = (count(16), count(28));
     Some((
-        pc2::HEADER_LEN as u64 + 12 * points * samples,
+        pc2::HEADER_LEN as u128 + 12 * points * samples,
         samples,
         points,
     ))

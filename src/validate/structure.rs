@@ -26,6 +26,11 @@ pub type Accessors = Vec<Result<Values, String>>;
 /// themselves are sound.
 pub fn check(doc: &Document, p: &mut Problems) -> Option<Accessors> {
     let root = &doc.root;
+    if let Some(problem) = crate::io::gltf_body::dangling_position(root) {
+        let (at, message) = problem.split_once(": ").unwrap_or(("/", &problem));
+        p.error(at, message);
+        return None;
+    }
     let before = p.errors.len();
     root.validate(root, json::Path::new, &mut |path, error| {
         p.error(pointer(&path().to_string()), format!("{error:?} value"));

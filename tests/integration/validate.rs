@@ -635,9 +635,7 @@ fn khronos_each(files: &[std::path::PathBuf]) -> Vec<Value> {
 }
 
 fn ours(path: &Path) -> Problems {
-    let mut problems = Problems::default();
-    check_gltf(path, &std::fs::read(path).unwrap(), &mut problems);
-    problems
+    ours_bytes(path, &std::fs::read(path).unwrap())
 }
 
 #[test]
@@ -1059,3 +1057,47 @@ for prim in stage.Traverse():
         attr.Set(Vt.Vec3fArray([v * float(sys.argv[3]) for v in attr.Get()]))
 stage.GetRootLayer().Export(sys.argv[2])
 ";
+
+/// Inputs that once made a reader panic under `cargo fuzz` (fuzz/; tests/fuzz_crashers/TARGET-what):
+/// each goes through the readers its fuzz target drives, which must now return an error.
+#[test]
+fn fuzz_crashers_are_errors() {
+    let dir = root().join("tests/fuzz_crashers");
+    let mut seen = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        let name = path.file_name().unwrap().to_string_lossy().into_owned();
+        let bytes = std::fs::read(&path).unwrap();
+        let text = String::from_utf8_lossy(&bytes);
+        match name.split_once('-').map(|(target, _)| target) {
+            Some("obj") => assert!(garmentbake::io::obj::parse_obj(&text, &name).is_err()),
+            Some("bvh") => assert!(garmentbake::io::bvh::Bvh::parse(&text, &name).is_err()),
+            Some("point_cache") => {
+                let (pc2, mdd) = (exporters::pc2::read(&bytes), exporters::mdd::read(&bytes));
+                assert!(pc2.is_err() || mdd.is_err(), "{name}");
+            }
+            Some("gltf_body") => {
+                let read = garmentbake::io::gltf_body::parse_body(&bytes, &path);
+                assert!(read.is_err(), "{name}");
+            }
+            Some("validate") => {
+                for file in ["x.glb", "x.gltf"] {
+                    assert!(!ours_bytes(&dir.join(file), &bytes).passed(), "{name}");
+                }
+                let mut p = Problems::default();
+                garmentbake::validate::cache::check_pc2(&bytes, &mut p);
+                garmentbake::validate::cache::check_mdd(&bytes, &mut p);
+                assert!(!p.passed(), "{name}");
+            }
+            _ => panic!("{name}: name it TARGET-what after the fuzz target that found it"),
+        }
+        seen += 1;
+    }
+    assert!(seen >= 2, "{seen} crashers in {}", dir.display());
+}
+
+fn ours_bytes(path: &Path, bytes: &[u8]) -> Problems {
+    let mut p = Problems::default();
+    check_gltf(path, bytes, &mut p);
+    p
+}
