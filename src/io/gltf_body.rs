@@ -38,6 +38,17 @@ fn import(
     base: Option<&Path>,
 ) -> Result<(gltf::Document, Vec<gltf::buffer::Data>), String> {
     let unreadable = |e: gltf::Error| format!("not a readable glTF file ({e})");
+    // gltf's GLB reader subtracts the 12-byte header from the declared length unchecked (an
+    // overflow panic in checked builds, found by fuzzing).
+    let declared = bytes
+        .get(8..12)
+        .map(|l| u32::from_le_bytes([l[0], l[1], l[2], l[3]]));
+    if bytes.starts_with(b"glTF") && declared.is_none_or(|length| length < 12) {
+        return Err(
+            "not a readable glTF file (GLB: the declared length is under the 12-byte header)"
+                .into(),
+        );
+    }
     let gltf::Gltf { document, blob } =
         gltf::Gltf::from_slice_without_validation(bytes).map_err(unreadable)?;
     let json = document.into_json();

@@ -392,11 +392,12 @@ impl Rules<'_> {
             .collect();
         let Some(pairs) = pairs else { return };
         let vertices = pairs[0].0.count();
-        if pairs
-            .iter()
-            .any(|(j, w)| j.count() != vertices || w.count() != vertices)
-        {
-            return; // reported as unequal counts
+        // Unequal counts and formats other than VEC4 are reported by the format rules (and a
+        // VEC2 here once indexed past its element: found by fuzzing).
+        let vec4 =
+            |v: &Values| v.count() == vertices && (0..vertices).all(|e| v.element(e).len() == 4);
+        if !pairs.iter().all(|(j, w)| vec4(j) && vec4(w)) {
+            return;
         }
         for v in 0..vertices {
             let mut sum = 0f32;
