@@ -5,7 +5,7 @@ use crate::common::*;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-/// Small models trained once per test run (1 epoch, width 32) with 4 and 8 influences: enough to
+/// Small models trained once per test run (1 epoch, width 32, no pose coverage) with 4 and 8 influences: enough to
 /// have a non-trivial PSD basis and skin; baking must reproduce whatever the network does.
 fn train(influences: &str) -> PathBuf {
     let dir = out_dir(&format!("bake_model_{influences}"));
@@ -28,6 +28,12 @@ fn train(influences: &str) -> PathBuf {
         "1",
         "--seed",
         "3",
+        // The fixture the bake and validate figures were measured on (docs/bake.md,
+        // docs/validate.md): trained on the clip's own poses only. With pose coverage (the
+        // default since) one epoch sees twice the poses and the 8-influence model's offsets need
+        // more than 16 targets for the Blender check's 0.5 mm.
+        "--coverage",
+        "0",
         "--out",
         path.to_str().unwrap(),
     ]);
