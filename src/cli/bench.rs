@@ -139,10 +139,8 @@ impl RolloutBench {
         }
         let maps = read_maps(&self.maps)?;
         let clip = load_clip(&self.motion, &maps, &body.skeleton, Some(fps))?.animation;
-        let n = self.frames.clamp(2, clip.frame_count().max(2));
-        let poses: Vec<_> = (0..n.min(clip.frame_count()))
-            .map(|f| clip.local_pose(f))
-            .collect();
+        let n = self.frames.max(2).min(clip.frame_count());
+        let poses: Vec<_> = (0..n).map(|f| clip.local_pose(f)).collect();
         let quiet = self.output.json;
         let roll = |fix: bool| -> Result<Timing> {
             let bar = crate::progress::bar(poses.len() as u64, "roll-out", quiet);
