@@ -20,6 +20,7 @@ LAYERS = [
     "train eval simulate rollout",
     "bake",
     "validate",
+    "batch",
     "cli",
 ]
 layer = {m: i for i, line in enumerate(LAYERS) for m in line.split()}

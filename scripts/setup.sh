@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Idempotent set-up: Debian packages, project venv (libtorch + usd-core), npm validators.
+# Idempotent set-up: Debian packages, project venv (libtorch + usd-core + ray), npm validators.
 # Fast when already done: every step checks before it installs.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -38,6 +38,13 @@ if [ ! -f .venv/lib/python3.11/site-packages/torch/lib/libtorch_cpu.so ] || ! .v
   .venv/bin/pip install -q --disable-pip-version-check --no-deps \
     torch==2.11.0 nvidia-cuda-runtime==13.0.96 nvidia-cuda-cupti==13.0.85
   .venv/bin/pip install -q --disable-pip-version-check usd-core==26.11 numpy
+fi
+
+# 2b. Ray (PyPI `ray`, one 79 MB wheel + small pure-Python deps, ~40 s): the engine of
+#     `garmentbake batch run --ray` and of its test (a local head node). The local runner needs nothing.
+if [ ! -x .venv/bin/ray ]; then
+  log "pip install ray==2.60.0"
+  .venv/bin/pip install -q --disable-pip-version-check ray==2.60.0
 fi
 
 # 3. npm tools used by tests: Khronos glTF validator, three.js (GLTFLoader in Node).

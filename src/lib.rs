@@ -15,9 +15,11 @@
 //!    ground truth; dynamic models rolled out frame by frame
 //! 9. `bake` — model output → the exporter-neutral baked asset (`exporters::asset`)
 //! 10. `validate` — files checked: structure, and replay against the model
-//! 11. `cli` — one command per pipeline step
+//! 11. `batch` — manifests expanded into keyed jobs (command lines), run here or on Ray
+//! 12. `cli` — one command per pipeline step
 
 pub mod bake;
+pub mod batch;
 pub mod body;
 pub mod cli;
 pub mod compute;

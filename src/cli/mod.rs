@@ -2,6 +2,7 @@
 
 pub mod args;
 pub mod bake;
+pub mod batch;
 pub mod bench;
 pub mod eval;
 pub mod inspect;
@@ -74,6 +75,7 @@ enum Command {
     TrainDynamic(train_dynamic::Args),
     Rollout(rollout::Args),
     Bench(bench::Args),
+    Batch(batch::Args),
     Validate(validate::Args),
     View(view::Args),
 }
@@ -92,6 +94,7 @@ pub fn main() -> i32 {
         Command::TrainDynamic(a) => run(&a, a.output.json),
         Command::Rollout(a) => run(&a, a.output.json),
         Command::Bench(a) => run(&a, a.json()),
+        Command::Batch(a) => run(&a, a.json()),
         Command::Validate(a) => run(&a, a.output.json),
         Command::View(a) => run(&a, a.output.json),
     };

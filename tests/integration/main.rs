@@ -4,6 +4,7 @@
 mod common;
 
 mod bake;
+mod batch;
 mod dynamic;
 mod errors;
 mod metrics;

@@ -1,0 +1,310 @@
+//! `garmentbake batch plan|run|job`: one manifest for many garments × clips, run incrementally
+//! here or on a Ray cluster.
+
+use super::args::OutputArgs;
+use super::Execute;
+use crate::batch::manifest;
+use crate::batch::plan::{plan, Plan};
+use crate::batch::run::{run_job, run_local, Outcome, Status};
+use anyhow::{bail, Context, Result};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Run the pipeline for many garments × clips from one manifest (batch.toml), incrementally.
+///
+/// The manifest (docs/batch.md, samples/batch.toml) names the body, the clips (paths or globs,
+/// joint map, fps) and per garment its fabric, seed, a static (PBNS) and/or dynamic recipe and
+/// the outputs wanted (glTF / USD bakes, point caches, validation). `plan` expands it into a graph
+/// of jobs (simulate → train / train-dynamic → eval / bake / rollout → validate), each one
+/// `garmentbake` command line with a key: the hash of its input files' bytes, its arguments and
+/// the tool version (and its upstream jobs' keys). `run` runs it: a job whose outputs already
+/// carry its key (FILE.key beside each) is not run again, so after an edit only what depends on
+/// the changed file runs, and a killed run picks up where it stopped.
+#[derive(clap::Args)]
+pub struct Args {
+    #[command(subcommand)]
+    what: What,
+}
+
+#[derive(clap::Subcommand)]
+enum What {
+    /// Print the job graph (with --json: the engine-neutral plan, schema in docs/batch.md).
+    Plan(PlanArgs),
+    /// Run the plan: here with --jobs at a time, or on a Ray cluster with --ray.
+    Run(RunArgs),
+    /// Run one job of a saved plan (what a Ray task or a farm job calls).
+    Job(JobArgs),
+}
+
+#[derive(clap::Args)]
+struct PlanArgs {
+    /// The manifest (TOML).
+    manifest: PathBuf,
+    /// Output folder (default: the manifest's `out`).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    #[command(flatten)]
+    output: OutputArgs,
+}
+
+#[derive(clap::Args)]
+struct RunArgs {
+    #[command(flatten)]
+    plan: PlanArgs,
+    /// Jobs run at the same time (each uses the manifest's `threads`).
+    #[arg(long, default_value_t = 1)]
+    jobs: usize,
+    /// Runs again a job that crashed or was killed (not one that reported bad input or a failed
+    /// check) up to this many times.
+    #[arg(long, default_value_t = 0)]
+    retries: usize,
+    /// Run on the Ray cluster at this address (HOST:PORT of `ray start --head`) instead of here;
+    /// the binary, inputs and output folder must be on a path every node sees.
+    #[arg(long, value_name = "ADDRESS")]
+    ray: Option<String>,
+}
+
+#[derive(clap::Args)]
+struct JobArgs {
+    /// A plan saved by `batch plan --json` or `batch run` (OUT/plan.json).
+    #[arg(long)]
+    plan: PathBuf,
+    /// The job's id.
+    #[arg(long)]
+    id: String,
+    #[arg(long, default_value_t = 0)]
+    retries: usize,
+}
+
+impl Args {
+    pub fn json(&self) -> bool {
+        match &self.what {
+            What::Plan(p) => p.output.json,
+            What::Run(r) => r.plan.output.json,
+            What::Job(_) => true,
+        }
+    }
+}
+
+#[derive(Serialize)]
+#[serde(untagged)]
+pub enum Report {
+    Plan {
+        #[serde(flatten)]
+        plan: Plan,
+        #[serde(skip)]
+        seconds: f64,
+    },
+    Run(RunReport),
+    Job(Outcome),
+}
+
+/// What `batch run` did.
+#[derive(Serialize)]
+pub struct RunReport {
+    pub schema: &'static str,
+    /// local or ray.
+    pub engine: String,
+    pub manifest: PathBuf,
+    pub out: PathBuf,
+    pub plan: PathBuf,
+    pub wall_seconds: f64,
+    pub ran: usize,
+    pub up_to_date: usize,
+    pub failed: usize,
+    pub skipped: usize,
+    pub jobs: Vec<Outcome>,
+}
+
+impl PlanArgs {
+    fn plan(&self) -> Result<Plan> {
+        let resolved = manifest::read(&self.manifest)?;
+        let out = match (&self.out, &resolved.manifest.out) {
+            (Some(o), _) => o.clone(),
+            (None, Some(o)) => o.clone(),
+            (None, None) => bail!("{}: no `out` folder; give --out", self.manifest.display()),
+        };
+        std::fs::create_dir_all(&out)
+            .with_context(|| format!("cannot create {}", out.display()))?;
+        let out = out
+            .canonicalize()
+            .with_context(|| format!("cannot read {}", out.display()))?;
+        plan(&resolved, &out)
+    }
+}
+
+fn exe() -> Result<PathBuf> {
+    std::env::current_exe().context("cannot find the garmentbake binary")
+}
+
+impl RunArgs {
+    fn run(&self, say: &dyn Fn(&str)) -> Result<RunReport> {
+        let plan = self.plan.plan()?;
+        let saved = plan.out.join("plan.json");
+        exporters::atomic::write_atomic(&saved, serde_json::to_string_pretty(&plan)?.as_bytes())?;
+        let exe = exe()?;
+        let start = Instant::now();
+        let jobs = match &self.ray {
+            Some(address) => {
+                say(&format!(
+                    "{} jobs on the Ray cluster at {address}",
+                    plan.jobs.len()
+                ));
+                crate::batch::ray::run(address, &saved, &exe, self.retries)?
+            }
+            None => {
+                let bar =
+                    crate::progress::bar(plan.jobs.len() as u64, "batch", self.plan.output.json);
+                let done = |o: &Outcome| {
+                    bar.inc(1);
+                    if !self.plan.output.json {
+                        bar.println(line(o, &plan.out));
+                    }
+                };
+                let outcomes = run_local(&plan, &exe, self.jobs, self.retries, &done);
+                bar.finish_and_clear();
+                outcomes
+            }
+        };
+        let count = |s: Status| jobs.iter().filter(|o| o.status == s).count();
+        Ok(RunReport {
+            schema: "garmentbake-batch-report/1",
+            engine: if self.ray.is_some() { "ray" } else { "local" }.into(),
+            manifest: plan.manifest.clone(),
+            out: plan.out.clone(),
+            plan: saved,
+            wall_seconds: start.elapsed().as_secs_f64(),
+            ran: count(Status::Ran),
+            up_to_date: count(Status::UpToDate),
+            failed: count(Status::Failed),
+            skipped: count(Status::Skipped),
+            jobs,
+        })
+    }
+}
+
+impl Execute for Args {
+    type Report = Report;
+
+    fn execute(&self, say: &dyn Fn(&str)) -> Result<Report> {
+        match &self.what {
+            What::Plan(p) => {
+                let start = Instant::now();
+                let plan = p.plan()?;
+                Ok(Report::Plan {
+                    plan,
+                    seconds: start.elapsed().as_secs_f64(),
+                })
+            }
+            What::Run(r) => Ok(Report::Run(r.run(say)?)),
+            What::Job(j) => {
+                let text = std::fs::read(&j.plan)
+                    .with_context(|| format!("cannot read {}", j.plan.display()))?;
+                let plan: Plan = serde_json::from_slice(&text)
+                    .with_context(|| format!("{} is not a batch plan", j.plan.display()))?;
+                let job = plan
+                    .jobs
+                    .iter()
+                    .find(|x| x.id == j.id)
+                    .with_context(|| format!("{}: no job '{}'", j.plan.display(), j.id))?;
+                Ok(Report::Job(run_job(job, &exe()?, j.retries)))
+            }
+        }
+    }
+
+    fn print(r: &Report) {
+        match r {
+            Report::Plan { plan, seconds } => print_plan(plan, *seconds),
+            Report::Run(run) => print_run(run),
+            Report::Job(o) => println!("{}", line(o, Path::new("/"))),
+        }
+    }
+
+    fn exit_code(r: &Report) -> i32 {
+        match r {
+            Report::Plan { .. } => 0,
+            Report::Run(run) => i32::from(run.failed > 0),
+            Report::Job(o) => i32::from(o.status == Status::Failed),
+        }
+    }
+}
+
+fn print_plan(plan: &Plan, seconds: f64) {
+    for j in &plan.jobs {
+        let fresh = if crate::batch::run::up_to_date(j) {
+            "up to date"
+        } else {
+            "to run"
+        };
+        println!("{:<44} {:<10} after: {}", j.id, fresh, j.deps.join(", "));
+    }
+    let mut kinds: Vec<(&str, usize)> = vec![];
+    for j in &plan.jobs {
+        match kinds.iter_mut().find(|(k, _)| *k == j.kind) {
+            Some((_, n)) => *n += 1,
+            None => kinds.push((&j.kind, 1)),
+        }
+    }
+    let kinds: Vec<String> = kinds.iter().map(|(k, n)| format!("{n} {k}")).collect();
+    println!(
+        "{} jobs ({}) planned in {:.3} s; outputs in {}",
+        plan.jobs.len(),
+        kinds.join(", "),
+        seconds,
+        plan.out.display()
+    );
+}
+
+/// One job's line: status, time, key figures, error.
+fn line(o: &Outcome, out: &Path) -> String {
+    let status = match o.status {
+        Status::Ran => "ran",
+        Status::UpToDate => "up to date",
+        Status::Failed => "FAILED",
+        Status::Skipped => "skipped",
+    };
+    let figures: Vec<String> = o
+        .metrics
+        .iter()
+        .map(|(k, v)| format!("{k} {v:.3}"))
+        .collect();
+    let files: Vec<String> = o
+        .outputs
+        .iter()
+        .map(|p| p.strip_prefix(out).unwrap_or(p).display().to_string())
+        .collect();
+    let mut s = format!(
+        "{:<44} {:<10} {:>7.1} s  {:<34} {}",
+        o.id,
+        status,
+        o.seconds,
+        figures.join(", "),
+        files.join(" ")
+    );
+    if let Some(e) = &o.error {
+        s.push_str(&format!("\n    {e}"));
+    }
+    s
+}
+
+fn print_run(r: &RunReport) {
+    println!(
+        "{:<44} {:<10} {:>9}  {:<34} outputs",
+        "job", "status", "seconds", "figures"
+    );
+    for o in &r.jobs {
+        println!("{}", line(o, &r.out));
+    }
+    println!(
+        "{} jobs on {}: {} ran, {} up to date, {} failed, {} skipped in {:.1} s; logs in {}",
+        r.jobs.len(),
+        r.engine,
+        r.ran,
+        r.up_to_date,
+        r.failed,
+        r.skipped,
+        r.wall_seconds,
+        r.out.join("logs").display()
+    );
+}
