@@ -165,10 +165,7 @@ pub fn roll_out(
         let x = motion_inputs(space, &h, encoder.shape.sigma, None);
         timing.inputs_ms = ms(clock);
         let clock = Instant::now();
-        let mut z = tch::no_grad(|| encoder.latent(&x, Some(&encoder.dynamic_features(space, &x))));
-        if let Some((lo, hi)) = &range {
-            z = z.clamp_tensor(Some(lo), Some(hi));
-        }
+        let z = model.next_latent(&x, range.as_ref())?;
         timing.encoder_ms = ms(clock);
         let clock = Instant::now();
         let canonical = tch::no_grad(|| space.canonical(&z));

@@ -8,8 +8,8 @@ use crate::io::gltf_body::read_body;
 use crate::models::file::{self, check_skeleton};
 use crate::motion::{load_clip, read_maps};
 use crate::preview::{
-    contact_sheet, save_png, DrawMesh, FramingMode, Panel, SheetOptions, View, BODY_GREY,
-    GARMENT_COLORS,
+    contact_sheet, save_png, DrawMesh, ErrorBands, FramingMode, Panel, SheetOptions, View,
+    BODY_GREY, GARMENT_COLORS,
 };
 use crate::rig::{JointTransform, SkelAnimation};
 use anyhow::{bail, Result};
@@ -40,6 +40,17 @@ pub struct Args {
     /// `simulate` or `eval`) that poses it.
     #[arg(long = "cache")]
     pub caches: Vec<PathBuf>,
+    /// With several --cache: draw each cached garment in its own panel (labelled by its file
+    /// name), side by side per frame, instead of all on one body: model / simulation / LBS.
+    #[arg(long)]
+    pub side_by_side: bool,
+    /// Colour each cached garment by its per-vertex distance to this cache of the same garment
+    /// (e.g. the simulation): green under a tenth of --error-scale-mm, red at or past it.
+    #[arg(long, value_name = "REF.pc2")]
+    pub error_vs: Option<PathBuf>,
+    /// The distance (mm) drawn red by --error-vs.
+    #[arg(long, default_value_t = 50.0)]
+    pub error_scale_mm: f64,
     /// Resample the clip to this rate (the rate the caches were written at).
     #[arg(long)]
     pub fps: Option<f32>,
@@ -107,12 +118,16 @@ impl From<ViewArg> for View {
     }
 }
 
-/// One posed frame: the body and the garments drawn with it (positions, triangles).
+/// One posed frame: the body and the garments drawn with it.
 struct Shot {
     label: String,
     body: Vec<[f32; 3]>,
-    garments: Vec<(Vec<[f32; 3]>, usize)>,
+    garments: Vec<Drawn>,
 }
+
+/// A garment's positions, its index among the garments, and per-vertex errors in mm with
+/// --error-vs.
+type Drawn = (Vec<[f32; 3]>, usize, Option<Vec<f64>>);
 
 impl Execute for Args {
     type Report = Report;
@@ -177,6 +192,16 @@ fn render(args: &Args) -> Result<Report> {
         .zip(&garments)
         .map(|(p, g)| cache_frames(p, g, poses.iter().map(|p| p.2).max().unwrap_or(0)))
         .collect::<Result<Vec<_>>>()?;
+    let reference = match &args.error_vs {
+        Some(path) => {
+            let Some(first) = garments.first() else {
+                bail!("--error-vs colours cached garments: add --garment and --cache");
+            };
+            let last = poses.iter().map(|p| p.2).max().unwrap_or(0);
+            Some(cache_frames(path, first, last)?)
+        }
+        None => None,
+    };
     let mut triangles: Vec<&[[u32; 3]]> = garments
         .iter()
         .map(|g| g.mesh.triangles.as_slice())
@@ -188,14 +213,37 @@ fn render(args: &Args) -> Result<Report> {
     for (label, pose, frame) in &poses {
         let skinning = body.skeleton.skinning_matrices(pose);
         let body_points = body.skin.skin_points(&body.mesh.positions, &skinning);
-        let mut drawn: Vec<(Vec<[f32; 3]>, usize)> = garments
+        let errors = |points: &[[f32; 3]]| {
+            // Only garments of the reference's mesh are coloured.
+            reference
+                .as_ref()
+                .filter(|r| r[*frame].len() == points.len())
+                .map(|r| vertex_errors_mm(points, &r[*frame]))
+        };
+        let mut drawn: Vec<Drawn> = garments
             .iter()
             .enumerate()
             .map(|(i, g)| match caches.get(i) {
-                Some(c) => (c[*frame].clone(), i),
-                None => (g.mesh.positions.clone(), i),
+                Some(c) => (c[*frame].clone(), i, errors(&c[*frame])),
+                None => (g.mesh.positions.clone(), i, None),
             })
             .collect();
+        if args.side_by_side && model.is_none() {
+            for (garment, path) in drawn.into_iter().zip(&args.caches) {
+                let name = path
+                    .file_stem()
+                    .map_or(String::new(), |n| n.to_string_lossy().into_owned());
+                let error = garment.2.as_ref().map_or(String::new(), |e| {
+                    format!(" {:.1}mm", e.iter().sum::<f64>() / e.len().max(1) as f64)
+                });
+                shots.push(Shot {
+                    label: format!("{label} {name}{error}"),
+                    body: body_points.clone(),
+                    garments: vec![garment],
+                });
+            }
+            continue;
+        }
         let Some(m) = &model else {
             shots.push(Shot {
                 label: label.clone(),
@@ -211,7 +259,7 @@ fn render(args: &Args) -> Result<Report> {
             std::slice::from_ref(pose),
             tch::Device::Cpu,
         );
-        drawn.push((x.into_iter().next().expect("one frame"), g));
+        drawn.push((x.into_iter().next().expect("one frame"), g, None));
         shots.push(Shot {
             label: format!("{label} model"),
             body: body_points.clone(),
@@ -222,24 +270,40 @@ fn render(args: &Args) -> Result<Report> {
             shots.push(Shot {
                 label: format!("{label} LBS"),
                 body: body_points,
-                garments: vec![(lbs, g)],
+                garments: vec![(lbs, g, None)],
             });
         }
     }
+    // Error bands per drawn garment, kept alive for the panels that borrow them.
+    let bands: Vec<Vec<Option<ErrorBands>>> = shots
+        .iter()
+        .map(|shot| {
+            shot.garments
+                .iter()
+                .map(|(_, i, e)| {
+                    e.as_ref()
+                        .map(|e| ErrorBands::new(triangles[*i], e, args.error_scale_mm))
+                })
+                .collect()
+        })
+        .collect();
     let mut panels = Vec::new();
-    for shot in &shots {
+    for (shot, bands) in shots.iter().zip(&bands) {
         for view in &args.views {
             let mut meshes = vec![DrawMesh {
                 positions: &shot.body,
                 triangles: &body.mesh.triangles,
                 color: BODY_GREY,
             }];
-            for (points, i) in &shot.garments {
-                meshes.push(DrawMesh {
-                    positions: points,
-                    triangles: triangles[*i],
-                    color: GARMENT_COLORS[*i % GARMENT_COLORS.len()],
-                });
+            for ((points, i, _), band) in shot.garments.iter().zip(bands) {
+                match band {
+                    Some(b) => meshes.extend(b.meshes(points)),
+                    None => meshes.push(DrawMesh {
+                        positions: points,
+                        triangles: triangles[*i],
+                        color: GARMENT_COLORS[*i % GARMENT_COLORS.len()],
+                    }),
+                }
             }
             panels.push(Panel {
                 meshes,
@@ -248,11 +312,16 @@ fn render(args: &Args) -> Result<Report> {
             });
         }
     }
-    let per_frame = args.views.len() * if args.lbs { 2 } else { 1 };
+    let side = if args.side_by_side && model.is_none() {
+        args.caches.len().max(1)
+    } else {
+        1
+    };
+    let per_frame = args.views.len() * if args.lbs { 2 } else { side };
     let opts = SheetOptions {
         panel_width: args.width,
         panel_height: args.height,
-        columns: if args.lbs {
+        columns: if args.lbs || side > 1 {
             per_frame
         } else {
             (per_frame * poses.len()).min(per_frame * 3)
@@ -291,6 +360,17 @@ pub(crate) fn pick_frames(total: usize, count: usize, list: &[usize]) -> Result<
             }
         })
         .collect())
+}
+
+/// Per-vertex distance (mm) between two frames of one garment.
+fn vertex_errors_mm(a: &[[f32; 3]], b: &[[f32; 3]]) -> Vec<f64> {
+    a.iter()
+        .zip(b)
+        .map(|(p, q)| {
+            1e3 * ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt()
+                as f64
+        })
+        .collect()
 }
 
 /// A garment's cache, long enough to show frame `last`.

@@ -63,9 +63,15 @@ pub struct Args {
     /// Also write the posed body per frame as a point cache.
     #[arg(long)]
     pub body_out: Option<PathBuf>,
-    /// A simulated cache of the same (single) clip to measure the roll-out against.
+    /// A simulated cache of the same (single) clip to measure the roll-out against (and plain
+    /// LBS beside it).
     #[arg(long)]
     pub reference: Option<PathBuf>,
+    /// Also write plain linear blend skinning of the rest garment (the fixed skin of the glTF
+    /// output: proximity weights, no dynamics) per frame as a point cache, the baseline to
+    /// compare with (e.g. `preview --side-by-side`).
+    #[arg(long, value_name = "LBS.pc2")]
+    pub lbs_out: Option<PathBuf>,
     /// Also write a page that plays the roll-out on the body in a browser (see `view`); with
     /// --reference, the simulation beside it and error colours against it.
     #[arg(long, value_name = "PAGE.html")]
@@ -161,6 +167,9 @@ pub struct Report {
     /// The same per 100 frames: whether a long roll-out drifts or blows up.
     pub windows: Vec<Window>,
     pub reference: Option<Versus>,
+    /// Plain LBS of the rest garment against the same reference.
+    pub lbs_reference: Option<Versus>,
+    pub lbs_out: Option<PathBuf>,
     pub out: PathBuf,
     pub out_bytes: u64,
     /// For a glTF output: blend shapes kept and the replay error.
@@ -284,6 +293,12 @@ impl Execute for Args {
                     .map(|c| c.validation(Some("roll-out".into())))
             })
             .transpose()?;
+        let lbs = (self.lbs_out.is_some() || reference.is_some())
+            .then(|| lbs_frames(&file, &poses))
+            .transpose()?;
+        if let (Some(path), Some(lbs)) = (&self.lbs_out, &lbs) {
+            write_cache(path, &file.garment, lbs, fps)?;
+        }
         if let Some(path) = &self.body_out {
             let bodies: Vec<Vec<[f32; 3]>> = poses
                 .iter()
@@ -320,6 +335,11 @@ impl Execute for Args {
             timing: timing(&rollout.timings),
             summary,
             windows: per_frame.chunks(WINDOW).map(Window::of).collect(),
+            lbs_reference: reference
+                .as_ref()
+                .zip(lbs.as_ref())
+                .map(|(r, l)| versus(l, r)),
+            lbs_out: self.lbs_out.clone(),
             reference: reference.map(|r| versus(&rollout.frames, &r)),
             out: self.out.clone(),
             out_bytes: std::fs::metadata(&self.out).map_or(0, |m| m.len()),
@@ -372,6 +392,12 @@ impl Execute for Args {
                 v.one_step_mm, v.first_50_mm, v.clip_mm, v.max_mm, v.worst_frame
             );
         }
+        if let Some(v) = &r.lbs_reference {
+            println!(
+                "plain LBS vs reference: after 1 step {:.2} mm, first 50 frames {:.2} mm, whole clip {:.2} mm, max {:.1} mm (frame {})",
+                v.one_step_mm, v.first_50_mm, v.clip_mm, v.max_mm, v.worst_frame
+            );
+        }
         if let Some(b) = &r.baked {
             println!(
                 "glTF: {} blend shapes (residual rank {}) within {:.3} mm of the roll-out (mean {:.4} mm)",
@@ -387,7 +413,7 @@ impl Execute for Args {
             r.out_bytes,
             r.out_bytes as f64 / r.frames.max(1) as f64
         );
-        if let Some(b) = &r.body_out {
+        for b in r.body_out.iter().chain(&r.lbs_out) {
             println!("wrote {}", b.display());
         }
         if let Some((page, bytes)) = &r.view {
@@ -404,6 +430,18 @@ impl Execute for Args {
 }
 
 impl Args {
+    /// The fixed skin of the model's garment: the LBS baseline and the glTF's skin.
+    fn garment_skin(file: &crate::models::file::ModelFile) -> Result<crate::rig::Skin> {
+        let body = &file.body;
+        let index = PointIndex::new(&body.mesh.positions)?;
+        Ok(smooth_garment_skin(
+            &file.garment,
+            &body.skin,
+            body.skeleton.joint_count(),
+            &index,
+        ))
+    }
+
     /// The roll-out as a skinned, blend-shaped glTF (see `bake::sequence`), on the body's
     /// skeleton with the same fixed skin as the model's LBS baseline.
     fn write_gltf(
@@ -415,13 +453,7 @@ impl Args {
         say: &dyn Fn(&str),
     ) -> Result<SequenceReport> {
         let body = &file.body;
-        let index = PointIndex::new(&body.mesh.positions)?;
-        let skin = smooth_garment_skin(
-            &file.garment,
-            &body.skin,
-            body.skeleton.joint_count(),
-            &index,
-        );
+        let skin = Self::garment_skin(file)?;
         let animation = SkelAnimation::from_poses("rollout", fps, poses);
         say("compressing the roll-out into blend shapes");
         let (mut asset, report) = bake_sequence(
@@ -440,6 +472,19 @@ impl Args {
             .with_context(|| format!("writing {}", self.out.display()))?;
         Ok(report)
     }
+}
+
+/// Plain LBS of the rest garment at every pose.
+fn lbs_frames(
+    file: &crate::models::file::ModelFile,
+    poses: &[Vec<crate::rig::JointTransform>],
+) -> Result<Vec<Vec<[f32; 3]>>> {
+    let skin = Args::garment_skin(file)?;
+    let skeleton = &file.body.skeleton;
+    Ok(poses
+        .iter()
+        .map(|p| skin.skin_points(&file.garment.positions, &skeleton.skinning_matrices(p)))
+        .collect())
 }
 
 fn mean_mm(per_frame: &[f64]) -> f64 {

@@ -8,11 +8,11 @@ use crate::io::gltf_body::read_body;
 use crate::io::point_cache::read_pc2;
 use crate::models::dynamic::SpaceShape;
 use crate::models::dynamic::{MotionShape, Seeds};
-use crate::models::file::{DynamicEpoch, ModelFile, MotionEpoch};
+use crate::models::file::{DynamicEpoch, ModelFile, MotionEpoch, RolloutRound};
 use crate::motion::{load_clip, read_maps};
 use crate::rig::Skeleton;
 use crate::train::dynamic::{FrameData, Reconstruction, Sequence, Settings, SpaceTrainer};
-use crate::train::motion::{one_step, MotionTrainer, Settings as MotionSettings};
+use crate::train::motion::{one_step, roll_clips, MotionTrainer, Settings as MotionSettings};
 use crate::train::{fit, FitOptions, Fitted, Training};
 use anyhow::{bail, Result};
 use serde::Serialize;
@@ -80,6 +80,13 @@ pub struct Args {
     /// simulation closer one step ahead.
     #[arg(long, default_value_t = 0.1)]
     pub ridge: f64,
+    /// Stage dynamic: rounds of roll-out-aware fitting. Each round rolls the model out over the
+    /// training clips (no collision fix) and refits the latent integrator on those self-made
+    /// histories too, with the simulation as the target, so that it learns to pull its own
+    /// drift back (teacher forcing alone never shows it a drifted history). One round costs one
+    /// roll-out of all training frames.
+    #[arg(long, default_value_t = 0)]
+    pub rollout_rounds: usize,
     /// Stage dynamic: channels of the motion features `E_t`.
     #[arg(long, default_value_t = 16)]
     pub motion_features: usize,
@@ -127,6 +134,11 @@ pub struct Report {
     pub radius_mm: Vec<(String, f64)>,
     pub last: Option<DynamicEpoch>,
     pub last_motion: Option<MotionEpoch>,
+    /// Stage dynamic: the roll-out-aware fit's rounds.
+    pub rollout_rounds: Vec<RolloutRound>,
+    /// Stage dynamic: the held-out clip rolled out from its first simulated frame (each
+    /// prediction the next history, no collision fix, latents held in the training range).
+    pub eval_rollout: Option<(String, Reconstruction)>,
 }
 
 /// Clips and their simulations, checked against each other.
@@ -203,6 +215,16 @@ impl Execute for Args {
         };
         row("training frames", &r.train);
         if let Some((name, e)) = &r.eval {
+            row(&format!("{name} (held out)"), e);
+        }
+        for round in &r.rollout_rounds {
+            println!(
+                "roll-out-aware fit, round {}: training clips rolled out at mean {:.2} mm before the refit ({} rows)",
+                round.round, round.train_rollout_mean_mm, round.rows
+            );
+        }
+        if let Some((name, e)) = &r.eval_rollout {
+            println!("roll-out from the first simulated frame (vertex L2, no collision fix):");
             row(&format!("{name} (held out)"), e);
         }
         if let Some(m) = &r.last_motion {
@@ -287,6 +309,8 @@ impl Args {
             radius_mm: radii_mm(info),
             last: info.history.last().cloned(),
             last_motion: None,
+            rollout_rounds: Vec::new(),
+            eval_rollout: None,
             fitted,
         })
     }
@@ -340,13 +364,28 @@ impl Args {
         if self.resume {
             trainer.resume(&crate::train::checkpoint_path(&self.out))?;
         }
+        let rounds = if self.resume {
+            trainer.info().rollout_rounds.clone()
+        } else {
+            self.fit_on_rollouts(&mut trainer)?
+        };
         let done = trainer.epochs_done();
         let fitted = fit(&mut trainer, &self.fit_options())?;
         let dynamic = trainer.dynamic();
         let train_err = one_step(dynamic, &trainer.data, fps)?;
+        let range = trainer.info().latent_bounds(device);
+        let mut eval_rollout = None;
         let eval = eval
             .map(|s| {
                 let data = self.frame_data(&trainer.file, &s, device)?;
+                let bar =
+                    crate::progress::bar(data.len() as u64, "held-out roll-out", self.output.json);
+                let rolled = roll_clips(dynamic, &data, fps, Some(&range), &mut |f| {
+                    bar.set_position(f as u64)
+                })?;
+                bar.finish_and_clear();
+                let truth = data.garment.index_select(0, &rolled.frames);
+                eval_rollout = Some((s.name.clone(), Reconstruction::of(&rolled.garment, &truth)));
                 Ok::<_, anyhow::Error>((s.name.clone(), one_step(dynamic, &data, fps)?))
             })
             .transpose()?;
@@ -360,8 +399,25 @@ impl Args {
             radius_mm: radii_mm(info),
             last: None,
             last_motion: trainer.info().history.last().cloned(),
+            rollout_rounds: rounds,
+            eval_rollout,
             fitted,
         })
+    }
+
+    /// `--rollout-rounds`, with a progress bar per round.
+    fn fit_on_rollouts(&self, trainer: &mut MotionTrainer) -> Result<Vec<RolloutRound>> {
+        let frames = trainer.data.len() as u64;
+        let bar = crate::progress::bar(
+            frames * self.rollout_rounds as u64,
+            "roll-out-aware fit",
+            self.output.json,
+        );
+        let rounds = trainer.fit_on_rollouts(self.rollout_rounds, &mut |round, f| {
+            bar.set_position(round as u64 * frames + f as u64)
+        })?;
+        bar.finish_and_clear();
+        Ok(rounds)
     }
 
     fn fit_options(&self) -> FitOptions<'_> {

@@ -103,6 +103,26 @@ pub struct MotionInfo {
     pub latent_min: Vec<f32>,
     pub latent_max: Vec<f32>,
     pub history: Vec<MotionEpoch>,
+    /// The roll-out-aware fit's rounds (`train-dynamic --rollout-rounds`).
+    #[serde(default)]
+    pub rollout_rounds: Vec<RolloutRound>,
+}
+
+impl MotionInfo {
+    /// The latent range as `[1, L]` bounds.
+    pub fn latent_bounds(&self, device: tch::Device) -> (tch::Tensor, tch::Tensor) {
+        let t = |v: &[f32]| tch::Tensor::from_slice(v).unsqueeze(0).to_device(device);
+        (t(&self.latent_min), t(&self.latent_max))
+    }
+}
+
+/// One round of the roll-out-aware fit: the regression's rows after it and the mean vertex
+/// error of the round's roll-outs of the training clips (before its refit).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RolloutRound {
+    pub round: usize,
+    pub rows: usize,
+    pub train_rollout_mean_mm: f64,
 }
 
 /// The dynamic stage's loss terms (mean over an epoch's steps): `L_geo` and `L_Z` for the frame

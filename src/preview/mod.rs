@@ -35,6 +35,56 @@ pub const GARMENT_COLORS: [[u8; 3]; 4] = [
     [200, 160, 60],
 ];
 
+/// Colours from "within a tenth of the scale" (green) to "at or past it" (red).
+pub const ERROR_COLORS: [[u8; 3]; 5] = [
+    [60, 170, 90],
+    [150, 200, 60],
+    [240, 200, 50],
+    [240, 130, 40],
+    [210, 40, 40],
+];
+/// The error bands' lower edges as fractions of the scale (band 0 starts at 0).
+pub const ERROR_EDGES: [f64; 4] = [0.1, 0.3, 0.6, 1.0];
+
+/// A mesh's triangles sorted into the [`ERROR_COLORS`] bands by their largest vertex error
+/// against `scale` (same unit), so a picture shows where an error is.
+pub struct ErrorBands {
+    bands: Vec<Vec<[u32; 3]>>,
+}
+
+impl ErrorBands {
+    pub fn new(triangles: &[[u32; 3]], vertex_errors: &[f64], scale: f64) -> ErrorBands {
+        let band = |e: f64| {
+            ERROR_EDGES
+                .iter()
+                .filter(|&&edge| e >= edge * scale)
+                .count()
+        };
+        let mut bands = vec![Vec::new(); ERROR_COLORS.len()];
+        for t in triangles {
+            let e = t
+                .iter()
+                .map(|&v| vertex_errors[v as usize])
+                .fold(0.0, f64::max);
+            bands[band(e)].push(*t);
+        }
+        ErrorBands { bands }
+    }
+
+    /// One mesh per band, drawn at `positions`.
+    pub fn meshes<'a>(&'a self, positions: &'a [[f32; 3]]) -> Vec<DrawMesh<'a>> {
+        self.bands
+            .iter()
+            .zip(ERROR_COLORS)
+            .map(|(triangles, color)| DrawMesh {
+                positions,
+                triangles,
+                color,
+            })
+            .collect()
+    }
+}
+
 /// One triangle mesh to draw in a single flat colour (shaded by the renderer).
 #[derive(Clone, Copy, Debug)]
 pub struct DrawMesh<'a> {

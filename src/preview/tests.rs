@@ -501,3 +501,29 @@ fn a_label_too_long_for_its_panel_shrinks_every_label_of_the_sheet() {
     assert_eq!(ink_rows(std::slice::from_ref(&short), 240), 14);
     assert_eq!(ink_rows(&[short, long], 240), 7);
 }
+
+#[test]
+fn error_bands_colour_each_triangle_by_its_largest_vertex_error() {
+    // Errors in mm against a 50 mm scale: band edges at 5, 15, 30 and 50 mm.
+    let triangles = [[0, 1, 2], [1, 2, 3], [2, 3, 4], [3, 4, 5]];
+    let errors = [0.0, 1.0, 4.9, 14.0, 31.0, 50.0];
+    let bands = ErrorBands::new(&triangles, &errors, 50.0);
+    let points = [[0.0f32; 3]; 6];
+    let per_band: Vec<Vec<[u32; 3]>> = bands
+        .meshes(&points)
+        .iter()
+        .map(|m| m.triangles.to_vec())
+        .collect();
+    assert_eq!(
+        per_band,
+        vec![
+            vec![[0, 1, 2]],
+            vec![[1, 2, 3]],
+            vec![],
+            vec![[2, 3, 4]],
+            vec![[3, 4, 5]],
+        ]
+    );
+    let colors: Vec<[u8; 3]> = bands.meshes(&points).iter().map(|m| m.color).collect();
+    assert_eq!(colors, ERROR_COLORS.to_vec());
+}

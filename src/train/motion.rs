@@ -10,7 +10,9 @@ use super::dynamic::{FrameData, Reconstruction};
 use super::{Blowup, Training};
 use crate::models::dynamic::motion::{motion_inputs, History, MotionInputs, StaticInputs};
 use crate::models::dynamic::{Dynamic, MotionEncoder, MotionShape};
-use crate::models::file::{self, KindInfo, ModelFile, MotionEpoch, MotionInfo, MotionTerms};
+use crate::models::file::{
+    self, KindInfo, ModelFile, MotionEpoch, MotionInfo, MotionTerms, RolloutRound,
+};
 use crate::models::Model;
 use anyhow::{bail, Result};
 use std::path::Path;
@@ -111,6 +113,37 @@ pub struct MotionTrainer {
     /// The frozen space's inputs of every frame's step (teacher-forced), and `Z*` of every frame.
     statics: StaticInputs,
     latents: Tensor,
+    /// The linear path's regression rows: teacher-forced ones, then those of each roll-out
+    /// round (inputs `[Z^ball, Z^stay]`, `Z_{t−1}`, and the simulated target `Z*_t`).
+    rows: Vec<Rows>,
+}
+
+/// Regression rows of the linear path.
+struct Rows {
+    inertia: Tensor,
+    previous: Tensor,
+    target: Tensor,
+}
+
+impl Rows {
+    fn cat(all: &[Rows]) -> Rows {
+        let cat = |f: fn(&Rows) -> &Tensor| Tensor::cat(&all.iter().map(f).collect::<Vec<_>>(), 0);
+        Rows {
+            inertia: cat(|r| &r.inertia),
+            previous: cat(|r| &r.previous),
+            target: cat(|r| &r.target),
+        }
+    }
+}
+
+/// Roll-outs of every clip of a [`FrameData`] from its first simulated frame (no collision fix):
+/// the predicted garments of the predicted frames, their indices, and the linear path's inputs
+/// at each of them.
+pub struct ClipRollouts {
+    pub garment: Tensor,
+    pub frames: Tensor,
+    inertia: Tensor,
+    previous: Tensor,
 }
 
 impl MotionTrainer {
@@ -144,10 +177,15 @@ impl MotionTrainer {
         let frames = Tensor::from_slice(&predicted_frames(&data)).to_device(device);
         let mut encoder = encoder;
         let fitted = statics.select(&frames);
+        let teacher = Rows {
+            inertia: fitted.inertia,
+            previous: fitted.previous_latent,
+            target: latents.index_select(0, &frames),
+        };
         encoder.init_linear(
-            &fitted.inertia,
-            &fitted.previous_latent,
-            &latents.index_select(0, &frames),
+            &teacher.inertia,
+            &teacher.previous,
+            &teacher.target,
             settings.ridge,
         );
         let (lo, hi) = latent_range(&latents);
@@ -169,6 +207,7 @@ impl MotionTrainer {
             latent_min: lo,
             latent_max: hi,
             history: Vec::new(),
+            rollout_rounds: Vec::new(),
         };
         dynamic.motion = Some(encoder);
         match &mut file.info.model {
@@ -193,7 +232,53 @@ impl MotionTrainer {
             frames,
             statics,
             latents,
+            rows: vec![teacher],
         })
+    }
+
+    /// Roll-out-aware fit of the linear path ("data as demonstrator", Venkatraman et al. 2015):
+    /// each round rolls the model out over every training clip from its first simulated frame,
+    /// adds every predicted frame's inputs (a history the model made itself) with the simulated
+    /// frame's latent as the target, and refits on all rows so far. The integrator thus learns
+    /// to pull its own drifted states back, which teacher forcing never shows it. Returns each
+    /// round's roll-out error on the training clips before its refit.
+    pub fn fit_on_rollouts(
+        &mut self,
+        rounds: usize,
+        progress: &mut dyn FnMut(usize, usize),
+    ) -> Result<Vec<RolloutRound>> {
+        let mut done = Vec::new();
+        for round in 0..rounds {
+            let range = self.info().latent_bounds(self.settings.device);
+            let rolled = roll_clips(
+                self.dynamic(),
+                &self.data,
+                self.fps,
+                Some(&range),
+                &mut |f| progress(round, f),
+            )?;
+            let truth = self.data.garment.index_select(0, &rolled.frames);
+            let error = Reconstruction::of(&rolled.garment, &truth);
+            self.rows.push(Rows {
+                target: self.latents.index_select(0, &rolled.frames),
+                inertia: rolled.inertia,
+                previous: rolled.previous,
+            });
+            let all = Rows::cat(&self.rows);
+            let ridge = self.settings.ridge;
+            let Model::Dynamic(d) = &mut self.file.model else {
+                unreachable!("a dynamic trainer holds a dynamic model")
+            };
+            let encoder = d.motion.as_mut().expect("set in new");
+            encoder.init_linear(&all.inertia, &all.previous, &all.target, ridge);
+            done.push(RolloutRound {
+                round: round + 1,
+                rows: all.target.size()[0] as usize,
+                train_rollout_mean_mm: error.mean_mm,
+            });
+        }
+        self.info_mut().rollout_rounds = done.clone();
+        Ok(done)
     }
 
     pub fn dynamic(&self) -> &Dynamic {
@@ -313,6 +398,65 @@ pub fn vertex_distance(a: &Tensor, b: &Tensor) -> Tensor {
         .square()
         .sum_dim_intlist(2, false, Kind::Float)
         .sqrt()
+}
+
+/// Rolls `dynamic` out over every clip of `data` from the clip's first simulated frame, frame by
+/// frame (each prediction the next history), without the collision fix; latents held in
+/// `range` (the model's training range, as `rollout` holds them). `progress` gets the frames
+/// done.
+pub fn roll_clips(
+    dynamic: &Dynamic,
+    data: &FrameData,
+    fps: f64,
+    range: Option<&(Tensor, Tensor)>,
+    progress: &mut dyn FnMut(usize),
+) -> Result<ClipRollouts> {
+    let encoder = dynamic.motion()?;
+    let space = &dynamic.space;
+    let device = data.garment.device();
+    let mut ends = data.clip_starts[1..].to_vec();
+    ends.push(data.len());
+    let at = |f: usize| Tensor::from_slice(&[f as i64]).to_device(device);
+    let (mut garments, mut frames, mut inertia, mut previous) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut done = 0;
+    for (&start, &end) in data.clip_starts.iter().zip(&ends) {
+        let mut history = vec![data.garment.narrow(0, start as i64, 1)];
+        for t in start + 1..end {
+            let back = |k: usize| history[history.len().saturating_sub(k)].shallow_clone();
+            let h = History {
+                garment: [back(1), back(2), back(3)],
+                before: data.body.select(&at(t - 1)),
+                now: data.body.select(&at(t)),
+                fps,
+            };
+            let x = motion_inputs(space, &h, encoder.shape.sigma, None);
+            let z = dynamic.next_latent(&x, range)?;
+            let g = tch::no_grad(|| space.skin(&space.canonical(&z), &h.now.transforms));
+            if g.isfinite().logical_not().any().int64_value(&[]) != 0 {
+                bail!("the roll-out produced a non-finite vertex at frame {t}");
+            }
+            inertia.push(x.inertia);
+            previous.push(x.previous_latent);
+            frames.push(t as i64);
+            garments.push(g.shallow_clone());
+            history.push(g);
+            if history.len() > 3 {
+                drop(history.remove(0));
+            }
+            done += 1;
+            progress(done);
+        }
+    }
+    if frames.is_empty() {
+        bail!("nothing to roll out: every clip has a single frame");
+    }
+    Ok(ClipRollouts {
+        garment: Tensor::cat(&garments, 0),
+        frames: Tensor::from_slice(&frames).to_device(device),
+        inertia: Tensor::cat(&inertia, 0),
+        previous: Tensor::cat(&previous, 0),
+    })
 }
 
 /// One-step predictions (teacher-forced histories) of every frame that has a previous frame in

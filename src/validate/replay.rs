@@ -5,7 +5,7 @@
 use crate::bake::skinned_mesh_asset;
 use crate::eval::model_frames;
 use crate::models::file::ModelFile;
-use crate::preview::{render_panel, save_png, DrawMesh, Framing, Panel, View};
+use crate::preview::{render_panel, save_png, ErrorBands, Framing, Panel, View};
 use crate::rig::SkelAnimation;
 use anyhow::{Context, Result};
 use serde::Serialize;
@@ -174,43 +174,16 @@ pub fn compare(
     }
 }
 
-/// Colours from "within a tenth of the tolerance" (green) to "at or past it" (red).
-const ERROR_COLORS: [[u8; 3]; 5] = [
-    [60, 170, 90],
-    [150, 200, 60],
-    [240, 200, 50],
-    [240, 130, 40],
-    [210, 40, 40],
-];
-
 /// The model's garment at the worst frame, each triangle coloured by its largest vertex error
 /// relative to the tolerance (front view), written atomically as PNG.
 pub fn error_png(reference: &Reference, error: &ReplayError, path: &Path) -> Result<()> {
     let points = &reference.frames[error.worst_frame];
-    let band = |e: f64| {
-        let x = e / error.tolerance_mm;
-        [0.1, 0.3, 0.6, 1.0]
-            .iter()
-            .filter(|&&edge| x >= edge)
-            .count()
-    };
-    let mut bins: Vec<Vec<[u32; 3]>> = vec![Vec::new(); ERROR_COLORS.len()];
-    for t in &reference.triangles {
-        let e = t
-            .iter()
-            .map(|&v| error.worst_frame_errors[v as usize])
-            .fold(0.0, f64::max);
-        bins[band(e)].push(*t);
-    }
-    let meshes: Vec<DrawMesh> = bins
-        .iter()
-        .zip(ERROR_COLORS)
-        .map(|(triangles, color)| DrawMesh {
-            positions: points,
-            triangles,
-            color,
-        })
-        .collect();
+    let bands = ErrorBands::new(
+        &reference.triangles,
+        &error.worst_frame_errors,
+        error.tolerance_mm,
+    );
+    let meshes = bands.meshes(points);
     let panel = Panel {
         meshes,
         view: View::Front,

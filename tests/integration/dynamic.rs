@@ -199,13 +199,18 @@ fn bad_inputs_name_the_file_and_write_nothing() {
 }
 
 /// The space (linear path only) and the motion stage on the six simulated frames.
-fn motion_model(dir: &Path, sim: &Path, name: &str, ridge: &str) -> (PathBuf, serde_json::Value) {
+fn motion_model(
+    dir: &Path,
+    sim: &Path,
+    name: &str,
+    extra: &[&str],
+) -> (PathBuf, serde_json::Value) {
     let space = dir.join("space.safetensors");
     if !space.exists() {
         train(sim, &space, "0", &[]);
     }
     let out = dir.join(name);
-    let report = garmentbake_json(&[
+    let mut args = vec![
         "train-dynamic",
         "--stage",
         "dynamic",
@@ -219,14 +224,14 @@ fn motion_model(dir: &Path, sim: &Path, name: &str, ridge: &str) -> (PathBuf, se
         "30",
         "--epochs",
         "0",
-        "--ridge",
-        ridge,
         "--threads",
         "1",
         "--out",
         out.to_str().unwrap(),
         "--json",
-    ]);
+    ];
+    args.extend_from_slice(extra);
+    let report = garmentbake_json(&args);
     (out, report)
 }
 
@@ -259,8 +264,8 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
     let dir = out_dir("dyn_motion");
     let sim = short_sim(&dir);
     // A huge ridge pins the fitted integrator to "keep the previous latent": the baseline.
-    let (_, held) = motion_model(&dir, &sim, "held.safetensors", "1e9");
-    let (model, fitted) = motion_model(&dir, &sim, "fitted.safetensors", "1e-3");
+    let (_, held) = motion_model(&dir, &sim, "held.safetensors", &["--ridge", "1e9"]);
+    let (model, fitted) = motion_model(&dir, &sim, "fitted.safetensors", &["--ridge", "1e-3"]);
     let (h, f) = (
         held["train"]["mean_mm"].as_f64().unwrap(),
         fitted["train"]["mean_mm"].as_f64().unwrap(),
@@ -270,6 +275,25 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
         f < 0.5 * h,
         "one-step error {h:.2} mm held, {f:.2} mm fitted"
     );
+    // Roll-out-aware fit: refitted on its own roll-out of the clip, the model's next roll-out
+    // is closer to the simulation than the teacher-forced fit's.
+    let (_, refit) = motion_model(
+        &dir,
+        &sim,
+        "refit.safetensors",
+        &["--ridge", "1e-3", "--rollout-rounds", "2"],
+    );
+    let rounds = refit["rollout_rounds"].as_array().unwrap();
+    let rows: Vec<u64> = rounds.iter().map(|r| r["rows"].as_u64().unwrap()).collect();
+    assert_eq!(
+        rows,
+        [10, 15],
+        "five teacher-forced rows, five more per round"
+    );
+    let before = rounds[0]["train_rollout_mean_mm"].as_f64().unwrap();
+    let after = rounds[1]["train_rollout_mean_mm"].as_f64().unwrap();
+    eprintln!("roll-out of the training frames: {before:.3} mm teacher-forced fit, {after:.3} mm refitted");
+    assert!(after < before, "{before:.3} mm then {after:.3} mm");
     let o = garmentbake_in_root(&["inspect", model.to_str().unwrap()]);
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(text.contains("dynamic"), "{text}");
@@ -404,7 +428,7 @@ fn rollout_refuses_a_space_only_model_and_a_cache_of_another_mesh() {
     let fails = |model: &Path, init: &str| fails_to(model, init, &dir.join("never.pc2"));
     let err = fails(&space, "rest");
     assert!(err.contains("only its generative space"), "{err}");
-    let (model, _) = motion_model(&dir, &sim, "m.safetensors", "0.1");
+    let (model, _) = motion_model(&dir, &sim, "m.safetensors", &["--ridge", "0.1"]);
     let body = dir.join("body.pc2");
     let o = garmentbake_in_root(&[
         "rollout",

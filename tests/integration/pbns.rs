@@ -560,6 +560,12 @@ fn tiny_train_cli_threads(out: &Path, threads: &str, extra: &[&str]) -> std::pro
     .arg("--out")
     .arg(out)
     .args(extra)
+    // The clip's own poses only unless a test asks for coverage: half the poses per epoch.
+    .args(if extra.contains(&"--coverage") {
+        &[][..]
+    } else {
+        &["--coverage", "0"][..]
+    })
     .output()
     .unwrap()
 }
@@ -1134,7 +1140,7 @@ fn eval_reports_pose_coverage_and_clamps_weights_to_the_trained_range() {
     use garmentbake::eval::ClipCoverage;
     let _g = serial();
     let out = tmp("coverage.safetensors");
-    let r = tiny_train_cli(&out, &["--epochs", "2"]);
+    let r = tiny_train_cli(&out, &["--epochs", "2", "--coverage", "1"]);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
     let text = String::from_utf8_lossy(&r.stdout);
     assert!(

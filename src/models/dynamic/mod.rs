@@ -31,6 +31,22 @@ impl Dynamic {
             anyhow::anyhow!("this dynamic model has only its generative space (stage 1); train its motion encoder with `garmentbake train-dynamic --stage dynamic --from MODEL`")
         })
     }
+
+    /// The next frame's latent from its inputs (no gradients), held per dimension inside
+    /// `range` (`[1, L]` bounds) when given: a roll-out's step, shared by `rollout` and the
+    /// roll-out-aware fit.
+    pub fn next_latent(
+        &self,
+        x: &motion::MotionInputs,
+        range: Option<&(tch::Tensor, tch::Tensor)>,
+    ) -> anyhow::Result<tch::Tensor> {
+        let encoder = self.motion()?;
+        let z = tch::no_grad(|| encoder.latent(x, Some(&encoder.dynamic_features(&self.space, x))));
+        Ok(match range {
+            Some((lo, hi)) => z.clamp_tensor(Some(lo), Some(hi)),
+            None => z,
+        })
+    }
 }
 
 /// The garment's uniform Laplacian `x − mean of its neighbours`, per vertex of `x [B, V, 3]`,
