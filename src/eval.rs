@@ -111,8 +111,8 @@ pub fn compare(
 /// How far each frame of a clip lies from the poses a model was trained on.
 #[derive(Clone, Debug, Serialize)]
 pub struct ClipCoverage {
-    /// Frames at least this far from every training pose are beyond the trained range (radians,
-    /// the balancing threshold; see [`crate::models::coverage`]).
+    /// Frames at least this far from every training pose are beyond the trained range (radians;
+    /// see [`crate::models::coverage`]).
     pub threshold: f32,
     /// Per frame, the distance to the nearest training pose (radians).
     pub distance: Vec<f32>,

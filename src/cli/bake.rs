@@ -4,6 +4,7 @@
 use super::args::{ClipArgs, ComputeArgs, OutputArgs};
 use super::Execute;
 use crate::bake::pbns::{bake, BakeOptions, BakeReport, Targets};
+use crate::eval::ClipCoverage;
 
 use crate::motion::{load_clip, read_maps};
 use crate::validate::Validation;
@@ -18,6 +19,10 @@ use std::path::PathBuf;
 /// next to the joint animation. The basis is compressed (SVD of the offsets the clips use):
 /// --max-targets fixes the count, --tolerance-mm picks the fewest within a replay error; with
 /// neither, the full basis is written. The replay error against the network is printed in mm.
+///
+/// Per clip, the pose coverage is printed as `eval` prints it (each frame's pose distance to the
+/// nearest training pose, the frames beyond the trained range, the farthest frames): the frames
+/// to look at before shipping the file.
 #[derive(clap::Args)]
 pub struct Args {
     /// Trained model (.safetensors from `garmentbake train`).
@@ -54,12 +59,51 @@ pub struct Args {
     pub output: OutputArgs,
 }
 
+/// One clip's pose coverage, as `eval` reports it.
+#[derive(Serialize)]
+pub struct ClipCoverageLine {
+    pub clip: String,
+    #[serde(flatten)]
+    pub coverage: ClipCoverage,
+    /// The 8 frames farthest from the training poses (farthest first).
+    pub farthest: Vec<usize>,
+}
+
+impl ClipCoverageLine {
+    /// Every clip's coverage, when the model stores its training poses.
+    fn of_clips(
+        model: &crate::models::file::ModelFile,
+        clips: &[crate::rig::SkelAnimation],
+    ) -> Result<Vec<ClipCoverageLine>> {
+        let (Some(c), joints) = (&model.coverage, &model.pbns()?.feature_joints) else {
+            return Ok(Vec::new());
+        };
+        Ok(clips
+            .iter()
+            .map(|clip| {
+                let poses: Vec<_> = (0..clip.frame_count())
+                    .map(|f| clip.local_pose(f))
+                    .collect();
+                let coverage = ClipCoverage::of(c, joints, &poses);
+                ClipCoverageLine {
+                    clip: clip.name.clone(),
+                    farthest: coverage.farthest(8),
+                    coverage,
+                }
+            })
+            .collect())
+    }
+}
+
 /// What was written and what the bake cost.
 #[derive(Serialize)]
 pub struct Report {
     pub out: PathBuf,
     pub bytes: u64,
     pub report: BakeReport,
+    /// Per clip, how far its frames lie from the training poses (empty for models trained before
+    /// the coverage report).
+    pub coverage: Vec<ClipCoverageLine>,
     /// With --validate: one check per clip.
     pub validation: Option<Vec<Validation>>,
     /// With --view: the page and its size in bytes.
@@ -119,6 +163,7 @@ impl Execute for Args {
             with_body: self.with_body,
         };
         let (asset, report) = bake(&model, &clips, &opts, device)?;
+        let coverage = ClipCoverageLine::of_clips(&model, &clips)?;
         exporters::write(&asset, &self.out)
             .with_context(|| format!("writing {}", self.out.display()))?;
         let validation = self
@@ -144,6 +189,7 @@ impl Execute for Args {
             out: self.out.clone(),
             bytes: std::fs::metadata(&self.out).map(|m| m.len()).unwrap_or(0),
             report,
+            coverage,
             validation,
             view,
         })
@@ -166,6 +212,14 @@ impl Execute for Args {
                 c.max_error_m * 1e3,
                 c.mean_error_m * 1e3
             );
+        }
+        for c in &r.coverage {
+            let frames = c.coverage.distance.len();
+            let line = super::eval::coverage_line(&c.coverage, frames, &c.farthest);
+            println!("{}: {line}", c.clip);
+        }
+        if r.coverage.is_empty() {
+            println!("coverage: this model has no training poses stored (trained before the coverage report)");
         }
         println!("wrote {} ({:.1} MB)", r.out.display(), r.bytes as f64 / 1e6);
         if let Some((page, bytes)) = &r.view {

@@ -6,6 +6,7 @@ use super::Execute;
 use crate::eval::{compare, lbs_frames, model_frames, ClipCoverage, Comparison};
 use crate::io::gltf_body::read_body;
 use crate::metrics::{body_edges_under, ClothGeometry, Inside, Metrics};
+use crate::models::coverage::{Coverage, OutsideWeights};
 use crate::models::file::check_skeleton;
 use anyhow::{bail, Result};
 use serde::Serialize;
@@ -23,9 +24,10 @@ use std::path::PathBuf;
 ///
 /// Coverage (models trained with this version): each frame's pose distance to the nearest
 /// training pose (radians: the largest rotation-vector difference over the garment's joints,
-/// the measure pose balancing uses), the frames beyond the trained range (distance ≥ the
-/// balancing threshold) and the metrics split within / beyond it, so the frames to check before
-/// shipping are named. `--clamp-weights` keeps the network's blend-shape weights within the range
+/// the measure pose balancing uses), the frames beyond the trained range and the metrics split
+/// within / beyond it, so the frames to check before shipping are named. The range's threshold
+/// is stored by `train`: the distance within which 95 % of the training clips' frames lie from
+/// the training poses taken from other parts of the clips (each clip cut in 5 blocks). `--clamp-weights` keeps the network's blend-shape weights within the range
 /// they took over the training poses (clamped correctives, as engine ML deformers do).
 #[derive(clap::Args)]
 pub struct Args {
@@ -77,6 +79,9 @@ pub struct Report {
     /// range (absent for models trained before the coverage report).
     pub coverage: Option<CoverageReport>,
     pub clamped_weights: bool,
+    /// With --clamp-weights: the network's weights that lay outside the training range (the
+    /// ones clamping changed).
+    pub clamped: Option<OutsideWeights>,
     pub pc2: PathBuf,
     pub body_out: Option<PathBuf>,
     /// With --view: the page and its size in bytes.
@@ -112,6 +117,17 @@ impl SeriesInside {
             lbs: c.inside[1],
         }
     }
+}
+
+/// One line on a clip's pose coverage (`eval` and `bake` print the same).
+pub fn coverage_line(k: &ClipCoverage, frames: usize, farthest: &[usize]) -> String {
+    format!(
+        "pose distance to the training poses: median {:.3}, max {:.3} rad; {} of {frames} frames beyond the trained range (≥ {:.3} rad); farthest frames {farthest:?}",
+        k.median,
+        k.max,
+        k.beyond.len(),
+        k.threshold,
+    )
 }
 
 /// A clip's pose coverage and the figures of its frames within and beyond the trained range.
@@ -150,19 +166,13 @@ impl Execute for Args {
             super::view::check_page_path(page)?;
         }
         let (mut model, device) = self.compute.load_model(&self.model)?;
-        if self.clamp_weights {
-            let Some(c) = &model.coverage else {
-                bail!(
-                    "{}: --clamp-weights needs the blend-shape weight range stored by `train` since the coverage report; retrain the model",
-                    self.model.display()
-                );
-            };
-            let (lo, hi) = (c.weight_min.clone(), c.weight_max.clone());
-            if let crate::models::Model::Pbns(p) = &mut model.model {
-                p.clamp_weights(&lo, &hi);
-            }
+        if self.clamp_weights && model.coverage.is_none() {
+            bail!(
+                "{}: --clamp-weights needs the blend-shape weight range stored by `train` since the coverage report; retrain the model",
+                self.model.display()
+            );
         }
-        let network = model.pbns()?;
+        model.pbns()?;
         let body = match &self.body {
             Some(path) => {
                 let b = read_body(path)?;
@@ -176,6 +186,18 @@ impl Execute for Args {
         let poses: Vec<_> = (0..anim.frame_count())
             .map(|f| anim.local_pose(f))
             .collect();
+        let clamped = match (&model.coverage, self.clamp_weights) {
+            (Some(c), true) => {
+                let outside = outside_weights(model.pbns()?, c, &body.skeleton, &poses, device);
+                let (lo, hi) = (c.weight_min.clone(), c.weight_max.clone());
+                if let crate::models::Model::Pbns(p) = &mut model.model {
+                    p.clamp_weights(&lo, &hi);
+                }
+                Some(outside)
+            }
+            _ => None,
+        };
+        let network = model.pbns()?;
         let garment = model_frames(network, &body.skeleton, &poses, device);
         let lbs = lbs_frames(&model.lbs, &model.garment.positions, &body.skeleton, &poses);
         let geometry = ClothGeometry::new(&model.garment, model.info.fabric.density);
@@ -249,6 +271,7 @@ impl Execute for Args {
             body_overlap_vertices: OverlapSummary::of(&comparison.body_overlap),
             coverage,
             clamped_weights: self.clamp_weights,
+            clamped,
             pc2: self.out.clone(),
             body_out: self.body_out.clone(),
             view,
@@ -296,14 +319,35 @@ impl Execute for Args {
                 "coverage: this model has no training poses stored (trained before the coverage report)"
             ),
         }
-        if r.clamped_weights {
-            println!("blend-shape weights clamped to their range over the training poses");
+        if let Some(c) = &r.clamped {
+            println!(
+                "blend-shape weights clamped to their range over the training poses: {} of {} values were outside it ({:.2} %), in {} of {} frames",
+                c.outside,
+                c.values,
+                100.0 * c.outside as f64 / c.values.max(1) as f64,
+                c.frames,
+                r.frames
+            );
         }
         println!("wrote {}", r.pc2.display());
         if let Some((page, bytes)) = &r.view {
             println!("wrote {} ({:.1} MB)", page.display(), *bytes as f64 / 1e6);
         }
     }
+}
+
+/// The network's blend-shape weights over `poses` that lie outside the training range (before
+/// clamping).
+fn outside_weights(
+    network: &crate::models::Pbns,
+    coverage: &Coverage,
+    skeleton: &crate::rig::Skeleton,
+    poses: &[Vec<crate::rig::JointTransform>],
+    device: tch::Device,
+) -> OutsideWeights {
+    let batch = network.batch(skeleton, poses, device);
+    let weights = tch::no_grad(|| network.coefficients(&batch.features));
+    coverage.weights_outside(&weights)
 }
 
 /// Body skin within this distance of the garment at rest counts as under it (metres).
@@ -336,15 +380,7 @@ impl OverlapSummary {
 }
 
 fn print_coverage(c: &CoverageReport, frames: usize) {
-    let k = &c.clip;
-    println!(
-        "pose distance to the training poses: median {:.3}, max {:.3} rad; {} of {frames} frames beyond the trained range (≥ {} rad); farthest frames {:?}",
-        k.median,
-        k.max,
-        k.beyond.len(),
-        k.threshold,
-        c.farthest
-    );
+    println!("{}", coverage_line(&c.clip, frames, &c.farthest));
     for (name, split) in [("within", &c.within), ("beyond", &c.beyond_range)] {
         if let Some(s) = split {
             println!(

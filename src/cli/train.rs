@@ -72,6 +72,8 @@ pub struct Report {
     /// Generated poses whose garment joints were drawn across their widened ranges.
     pub poses_sampled: usize,
     pub poses_validation: usize,
+    /// The pose distance beyond which eval and bake report a frame as outside the trained range.
+    pub coverage_threshold: f32,
     pub frames_seen: usize,
     pub warnings: Vec<String>,
     pub last: Option<EpochRecord>,
@@ -115,6 +117,7 @@ impl Execute for Args {
             poses_recombined: count(&p.train, PoseKind::Recombined),
             poses_sampled: count(&p.train, PoseKind::Sampled),
             poses_validation: p.validation.len(),
+            coverage_threshold: trainer.info().training.beyond_range(),
             frames_seen: p.frames_seen,
             warnings,
             last: trainer.info().history.last().cloned(),
@@ -179,6 +182,11 @@ fn say_poses(trainer: &Trainer, say: &dyn Fn(&str)) {
         names.join(", ")
     ));
     let t = &trainer.info().training;
+    say(&format!(
+        "coverage threshold {:.3} rad: {:.0} % of the training clips' frames lie within it of the poses taken from the clips' other parts (eval and bake report frames beyond it)",
+        t.beyond_range(),
+        crate::train::poses::COVERAGE_PERCENTILE * 100.0
+    ));
     if t.inpainted > 0 {
         say(&format!(
             "initial weights: {} of {} vertices hang farther than {} m from the body: inpainted",

@@ -261,7 +261,13 @@ pub struct TrainingInfo {
     pub train_weights: bool,
     /// Clip file names (no directories: the bytes must not depend on where files live).
     pub motions: Vec<String>,
+    /// The balancing threshold (radians; see [`crate::models::coverage`]).
     pub pose_threshold: f32,
+    /// Frames at least this far from every training pose are beyond the trained range: the
+    /// 95th percentile of the training clips' held-out distances (`train::poses::
+    /// held_out_threshold`). Older files lack it and use `pose_threshold`.
+    #[serde(default)]
+    pub coverage_threshold: Option<f32>,
     pub poses_train: usize,
     pub poses_validation: usize,
     /// Training poses made by recombining limb chains of real frames (part of `poses_train`).
@@ -282,6 +288,13 @@ pub struct TrainingInfo {
     /// The epoch whose weights the model holds when `--patience` kept the best one.
     #[serde(default)]
     pub best_epoch: Option<usize>,
+}
+
+impl TrainingInfo {
+    /// The pose distance from which a frame is beyond the trained range.
+    pub fn beyond_range(&self) -> f32 {
+        self.coverage_threshold.unwrap_or(self.pose_threshold)
+    }
 }
 
 /// The PBNS potential's weighted terms (mean over an epoch's steps).
@@ -598,7 +611,7 @@ pub fn load(path: &Path, device: Device) -> Result<ModelFile> {
             || name == "garment.rest"
     };
     let coverage = match &info.model {
-        KindInfo::Pbns(p) => load_coverage(&tensors, p.training.pose_threshold)?,
+        KindInfo::Pbns(p) => load_coverage(&tensors, p.training.beyond_range())?,
         KindInfo::Dynamic(_) => None,
     };
     let mut extra = Vec::new();

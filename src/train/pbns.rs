@@ -431,6 +431,13 @@ impl Trainer {
         );
         poses.train.extend(recombined);
         poses.train.extend(sampled);
+        let coverage_threshold = poses::held_out_threshold(
+            &clips,
+            &poses.train,
+            &poses.joints,
+            poses::COVERAGE_FOLDS,
+            poses::COVERAGE_PERCENTILE,
+        );
         if poses.train.is_empty() || poses.validation.is_empty() {
             bail!(
                 "only {} balanced poses from {} frames: add clips or lower --pose-threshold",
@@ -479,6 +486,7 @@ impl Trainer {
             &pinned_list,
             motion_names,
             inpainted,
+            coverage_threshold,
         );
         let adam = Adam::new(&model.parameters(settings.train_weights));
         Ok(Trainer {
@@ -915,7 +923,7 @@ impl Trainer {
                 .iter()
                 .map(|p| p.key(&self.poses.joints))
                 .collect(),
-            threshold: self.settings.pose_threshold,
+            threshold: self.info().training.beyond_range(),
             weight_min: range(weights.amin(0, false)),
             weight_max: range(weights.amax(0, false)),
         }
@@ -1113,6 +1121,7 @@ fn describe(
     pinned_list: &[u32],
     motion_names: Vec<String>,
     inpainted: usize,
+    coverage_threshold: Option<f32>,
 ) -> ModelInfo {
     ModelInfo {
         format: FORMAT.into(),
@@ -1132,6 +1141,7 @@ fn describe(
                 train_weights: settings.train_weights,
                 motions: motion_names,
                 pose_threshold: settings.pose_threshold,
+                coverage_threshold,
                 poses_train: poses.train.len(),
                 poses_validation: poses.validation.len(),
                 poses_recombined: poses::count(&poses.train, poses::PoseKind::Recombined),

@@ -16,6 +16,7 @@
 use crate::models::coverage::{pose_distance, pose_key, PoseKey};
 use crate::rig::{JointTransform, SkelAnimation, Skeleton, Skin};
 use nalgebra::{UnitQuaternion, Vector3};
+use rayon::prelude::*;
 use serde::Serialize;
 
 /// Where a training pose comes from.
@@ -124,6 +125,63 @@ pub fn pose_set(
         frames_seen: clips.iter().map(SkelAnimation::frame_count).sum(),
         joints,
     }
+}
+
+/// Contiguous blocks each training clip is cut into for [`held_out_threshold`].
+pub const COVERAGE_FOLDS: usize = 5;
+
+/// The share of the training clips' frames that lie within the coverage threshold of the poses
+/// taken from elsewhere in the clips ([`held_out_threshold`]).
+pub const COVERAGE_PERCENTILE: f64 = 0.95;
+
+/// The pose distance beyond which a frame counts as outside the trained range, learnt from the
+/// training clips themselves: each clip is cut into `folds` contiguous blocks, and every frame's
+/// held-out distance is its distance to the nearest training pose (real or generated) whose
+/// source frame lies in another block; the threshold is the `percentile` of those distances. So
+/// a frame farther than this from every training pose is farther from them than nearly all of
+/// the training clips' own frames are from the poses of the clips' other parts.
+///
+/// Blocks rather than single frames: neighbouring frames are near-duplicates, so leaving out one
+/// frame would measure the frame rate, not coverage. `None` when no frame has a training pose
+/// outside its own block (a single tiny clip).
+pub fn held_out_threshold(
+    clips: &[SkelAnimation],
+    train: &[Pose],
+    joints: &[usize],
+    folds: usize,
+    percentile: f64,
+) -> Option<f32> {
+    let folds = folds.max(1);
+    let block = |clip: usize, frame: usize| {
+        let n = clips[clip].frame_count().max(1);
+        (clip, frame.min(n - 1) * folds / n)
+    };
+    let trained: Vec<((usize, usize), PoseKey)> = train
+        .iter()
+        .map(|p| (block(p.clip, p.frame), p.key(joints)))
+        .collect();
+    let frames: Vec<(usize, usize)> = clips
+        .iter()
+        .enumerate()
+        .flat_map(|(c, clip)| (0..clip.frame_count()).map(move |f| (c, f)))
+        .collect();
+    let mut distances: Vec<f32> = frames
+        .par_iter()
+        .filter_map(|&(c, f)| {
+            let own = block(c, f);
+            let key = pose_key(&clips[c].rotations[f], joints);
+            trained
+                .iter()
+                .filter(|(b, _)| *b != own)
+                .map(|(_, k)| pose_distance(k, &key))
+                .min_by(f32::total_cmp)
+        })
+        .collect();
+    if distances.is_empty() {
+        return None;
+    }
+    distances.sort_by(f32::total_cmp);
+    Some(crate::metrics::percentile(&distances, percentile) as f32)
 }
 
 /// Limb chains: every joint belongs to the chain started by its nearest ancestor-or-self whose

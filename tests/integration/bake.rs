@@ -314,3 +314,105 @@ fn usd_bake_replays_the_network_in_usdskel_and_the_usd_cache_equals_the_pc2() {
     // Measured 0.0005 mm: f32 noise; ten times that fails a real replay error.
     assert!(replay["max_mm"].as_f64().unwrap() <= 0.005);
 }
+
+/// The `coverage` entries of a bake's JSON report: (clip, threshold, distance, beyond).
+fn bake_coverage(json: &str) -> Vec<(String, f64, Vec<f64>, Vec<usize>)> {
+    let v: serde_json::Value = serde_json::from_str(json).unwrap();
+    v["coverage"]
+        .as_array()
+        .expect("bake reports coverage per clip")
+        .iter()
+        .map(|c| {
+            let nums = |k: &str| -> Vec<f64> {
+                c[k].as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|x| x.as_f64().unwrap())
+                    .collect()
+            };
+            (
+                c["clip"].as_str().unwrap().to_string(),
+                c["threshold"].as_f64().unwrap(),
+                nums("distance"),
+                nums("beyond").into_iter().map(|f| f as usize).collect(),
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn bake_reports_each_clips_coverage_and_the_cut_held_out_clip_is_all_beyond() {
+    let dir = out_dir("bake_coverage");
+    let glb = dir.join("x.glb");
+    let bake_json = |motion: &str| {
+        garmentbake_ok(&[
+            "bake",
+            "--model",
+            model().to_str().unwrap(),
+            "--motion",
+            s("motions/131_01.bvh"),
+            "--motion",
+            motion,
+            "--max-targets",
+            "8",
+            "--json",
+            "--out",
+            glb.to_str().unwrap(),
+        ])
+    };
+    let first = bake_json(s("motions/01_01.bvh"));
+    let report = bake_coverage(&first);
+    let names: Vec<&str> = report.iter().map(|c| c.0.as_str()).collect();
+    assert_eq!(names, ["131_01", "01_01"]);
+    for (clip, threshold, distance, beyond) in &report {
+        let expected: Vec<usize> = (0..distance.len())
+            .filter(|&f| distance[f] >= *threshold)
+            .collect();
+        assert_eq!(beyond, &expected, "{clip}");
+    }
+    // The training clip holds the training poses; the other subject's clip reaches beyond them
+    // (the fixture is trained on 131_01 alone, whose own held-out distances 131_02 stays within).
+    assert!(report[0].2.contains(&0.0));
+    let beyond = &report[1].3;
+    let max = report[1].2.iter().copied().fold(0.0, f64::max);
+    eprintln!(
+        "threshold {}, 01_01 max {max}, {} beyond",
+        report[1].1,
+        beyond.len()
+    );
+    assert!(
+        !beyond.is_empty(),
+        "no 01_01 frame beyond the trained range"
+    );
+    // The held-out clip (docs/pbns.md): those frames cut into a BVH are all beyond.
+    let json = dir.join("bake.json");
+    std::fs::write(&json, &first).unwrap();
+    let cut = dir.join("01_01.bvh");
+    run_ok(
+        std::process::Command::new("python3")
+            .arg(root().join("scripts/cut_bvh.py"))
+            .arg(sample("motions/01_01.bvh"))
+            .arg(&cut)
+            .arg("--beyond-in")
+            .arg(&json),
+    );
+    let held = bake_coverage(&bake_json(cut.to_str().unwrap()));
+    assert_eq!(held[1].2.len(), beyond.len());
+    for (f, d) in held[1].2.iter().enumerate() {
+        assert!(
+            *d >= held[1].1,
+            "cut frame {f} at {d} rad, within the range"
+        );
+    }
+    // A frame number past the clip is one error line, exit 2.
+    let out = std::process::Command::new("python3")
+        .arg(root().join("scripts/cut_bvh.py"))
+        .arg(sample("motions/01_01.bvh"))
+        .arg(dir.join("never.bvh"))
+        .args(["--frames", "3,9000"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).starts_with("error: "));
+    assert!(!dir.join("never.bvh").exists());
+}

@@ -1152,6 +1152,12 @@ fn eval_reports_pose_coverage_and_clamps_weights_to_the_trained_range() {
     let info = file.info.pbns().unwrap();
     assert_eq!(coverage.poses.len(), info.training.poses_train);
     assert!(info.training.poses_sampled > 0);
+    // The threshold learnt from the clip's held-out distances is stored and printed.
+    assert_eq!(info.training.coverage_threshold, Some(coverage.threshold));
+    assert!(
+        text.contains(&format!("coverage threshold {:.3} rad", coverage.threshold)),
+        "{text}"
+    );
     let model = file.pbns().unwrap();
     // The training clip's frames at training poses are at distance 0.
     let anim = clip("131_01.bvh");
@@ -1163,12 +1169,23 @@ fn eval_reports_pose_coverage_and_clamps_weights_to_the_trained_range() {
         c.distance.contains(&0.0),
         "no training frame found at distance 0"
     );
-    // Another clip through the CLI: beyond = distance ≥ threshold, within + beyond = all.
+    // Another subject's clip through the CLI (131_02 stays within 131_01's held-out range):
+    // beyond = distance ≥ threshold, within + beyond = all; clamped, the weights that were
+    // outside the range are counted.
     let r = gb()
-        .args(["eval", "--fps", "10", "--json", "--threads", "1", "--model"])
+        .args([
+            "eval",
+            "--fps",
+            "5",
+            "--json",
+            "--threads",
+            "1",
+            "--clamp-weights",
+        ])
+        .arg("--model")
         .arg(&out)
         .arg("--motion")
-        .arg(sample("motions/131_02.bvh"))
+        .arg(sample("motions/01_01.bvh"))
         .arg("--out")
         .arg(tmp("coverage.pc2"))
         .output()
@@ -1195,10 +1212,13 @@ fn eval_reports_pose_coverage_and_clamps_weights_to_the_trained_range() {
     }
     let frames = |k: &str| cov[k]["frames"].as_u64().unwrap_or(0) as usize;
     assert_eq!(frames("within") + frames("beyond_range"), distance.len());
-    assert!(
-        !beyond.is_empty(),
-        "131_02 goes beyond 131_01's poses at a 0.8 rad threshold"
+    let clamped = &v["clamped"];
+    assert_eq!(
+        clamped["values"].as_u64().unwrap() as usize,
+        distance.len() * coverage.weight_min.len()
     );
+    assert!(clamped["outside"].as_u64().unwrap() >= clamped["frames"].as_u64().unwrap());
+    assert!(!beyond.is_empty(), "01_01 goes beyond the poses of 131_01");
     // Clamped: on training poses the weights are unchanged, far beyond them within the range.
     let mut clamped = file::load(&out, Device::Cpu).unwrap();
     let garmentbake::models::Model::Pbns(m) = &mut clamped.model else {
@@ -1230,6 +1250,11 @@ fn eval_reports_pose_coverage_and_clamps_weights_to_the_trained_range() {
     };
     assert!(outside(&free) > 0, "the bent poses must leave the range");
     assert_eq!(outside(&held), 0);
+    // What eval reports as clamped is what lay outside.
+    let counted = coverage.weights_outside(&free);
+    assert_eq!(counted.outside as i64, outside(&free));
+    assert_eq!((counted.values, counted.frames), (free.numel(), 4));
+    assert_eq!(coverage.weights_outside(&held).outside, 0);
     let real_batch: Vec<_> = file_poses(&out);
     assert!(w(model, &real_batch).equal(&w(m, &real_batch)));
     // A model without stored coverage cannot clamp: one clear line.
@@ -1260,4 +1285,76 @@ fn file_poses(path: &Path) -> Vec<Vec<garmentbake::rig::JointTransform>> {
         .filter(|&f| c.distance[f] == 0.0)
         .map(|f| poses[f].clone())
         .collect()
+}
+
+#[test]
+fn the_coverage_threshold_holds_the_training_frames_and_not_a_pose_beyond_them() {
+    use garmentbake::models::coverage::{pose_key, Coverage};
+    use garmentbake::train::poses::{
+        held_out_threshold, pose_set, COVERAGE_FOLDS, COVERAGE_PERCENTILE,
+    };
+    let sk = &body().skeleton;
+    let j = |name: &str| sk.joint_names.iter().position(|n| n == name).unwrap();
+    // The skirt's feature joints (what `train` prints for it).
+    let names = [
+        "LHipJoint",
+        "LeftUpLeg",
+        "LowerBack",
+        "RHipJoint",
+        "RightUpLeg",
+        "LeftLeg",
+        "RightLeg",
+        "LeftFoot",
+        "RightFoot",
+    ];
+    let joints: Vec<usize> = names.iter().map(|n| j(n)).collect();
+    let clips = [clip("01_01.bvh"), clip("131_01.bvh")];
+    let set = pose_set(&clips, joints.clone(), 0.15, 0.15, 0);
+    let threshold = held_out_threshold(
+        &clips,
+        &set.train,
+        &joints,
+        COVERAGE_FOLDS,
+        COVERAGE_PERCENTILE,
+    )
+    .unwrap();
+    let coverage = Coverage {
+        poses: set.train.iter().map(|p| p.key(&joints)).collect(),
+        threshold,
+        weight_min: Vec::new(),
+        weight_max: Vec::new(),
+    };
+    let frames: Vec<_> = clips
+        .iter()
+        .flat_map(|c| c.rotations.iter().map(|r| pose_key(r, &joints)))
+        .collect();
+    let d = coverage.distances(&frames);
+    let beyond = d.iter().filter(|&&x| coverage.beyond(x)).count();
+    let farthest = d.iter().copied().fold(0.0, f32::max);
+    eprintln!(
+        "threshold {threshold:.3} rad; {beyond} of {} training-clip frames beyond (farthest {farthest:.3})",
+        d.len()
+    );
+    // The held-out distances of 95 % of the training clips' frames are within the threshold, and
+    // a frame's distance to all the training poses is at most its held-out one.
+    assert!(
+        beyond as f64 <= (1.0 - COVERAGE_PERCENTILE) * d.len() as f64,
+        "{beyond} of {} training-clip frames beyond {threshold}",
+        d.len()
+    );
+    // A hop no clip has: both hips raised 2 rad forward with the knees folded back 2.5 rad.
+    let mut hop = clips[1].rotations[0].clone();
+    for (joint, angle) in [
+        ("LeftUpLeg", -2.0),
+        ("RightUpLeg", -2.0),
+        ("LeftLeg", 2.5),
+        ("RightLeg", 2.5),
+    ] {
+        hop[j(joint)] = nalgebra::UnitQuaternion::from_scaled_axis(nalgebra::Vector3::x() * angle);
+    }
+    let far = coverage.distance(&pose_key(&hop, &joints));
+    assert!(
+        coverage.beyond(far),
+        "the hop is {far} rad from the training poses, threshold {threshold}"
+    );
 }
