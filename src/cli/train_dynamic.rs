@@ -84,8 +84,8 @@ pub struct Args {
     /// training clips (no collision fix) and refits the latent integrator on those self-made
     /// histories too, with the simulation as the target, so that it learns to pull its own
     /// drift back (teacher forcing alone never shows it a drifted history). One round costs one
-    /// roll-out of all training frames.
-    #[arg(long, default_value_t = 0)]
+    /// roll-out of all training frames. 0: the teacher-forced fit alone (closest one step ahead).
+    #[arg(long, default_value_t = 3)]
     pub rollout_rounds: usize,
     /// Stage dynamic: channels of the motion features `E_t`.
     #[arg(long, default_value_t = 16)]

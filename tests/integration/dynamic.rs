@@ -264,8 +264,20 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
     let dir = out_dir("dyn_motion");
     let sim = short_sim(&dir);
     // A huge ridge pins the fitted integrator to "keep the previous latent": the baseline.
-    let (_, held) = motion_model(&dir, &sim, "held.safetensors", &["--ridge", "1e9"]);
-    let (model, fitted) = motion_model(&dir, &sim, "fitted.safetensors", &["--ridge", "1e-3"]);
+    let (_, held) = motion_model(
+        &dir,
+        &sim,
+        "held.safetensors",
+        &["--ridge", "1e9", "--rollout-rounds", "0"],
+    );
+    // Teacher-forced fits: the one-step comparison (the roll-out-aware fit trades one-step
+    // accuracy for roll-outs).
+    let (model, fitted) = motion_model(
+        &dir,
+        &sim,
+        "fitted.safetensors",
+        &["--ridge", "1e-3", "--rollout-rounds", "0"],
+    );
     let (h, f) = (
         held["train"]["mean_mm"].as_f64().unwrap(),
         fitted["train"]["mean_mm"].as_f64().unwrap(),
