@@ -6,7 +6,7 @@ use super::manifest::{BakeSpec, Clip, Garment, Resolved};
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
 /// The plan's schema name; bumped when a field changes meaning.
@@ -75,8 +75,10 @@ pub fn plan(resolved: &Resolved, out: &Path) -> Result<Plan> {
         jobs: Vec::new(),
         hashes: HashMap::new(),
         producers: HashMap::new(),
+        ids: HashSet::new(),
         manifest: resolved.file.clone(),
     };
+    b.hash_all(&files(resolved));
     for g in &resolved.manifest.garments {
         if g.pbns.is_some() {
             static_jobs(&mut b, resolved, g)?;
@@ -140,6 +142,7 @@ struct Builder {
     jobs: Vec<Job>,
     /// Content hashes of input files, each file read once per plan.
     hashes: HashMap<PathBuf, String>,
+    ids: HashSet<String>,
     /// Output path → index of the job writing it.
     producers: HashMap<PathBuf, usize>,
     manifest: PathBuf,
@@ -148,7 +151,7 @@ struct Builder {
 impl Builder {
     fn add(&mut self, node: Node, args: Vec<Arg>, hidden: &[PathBuf]) -> Result<PathBuf> {
         let id = node.id();
-        if self.jobs.iter().any(|j| j.id == id) {
+        if !self.ids.insert(id.clone()) {
             bail!("{}: two jobs would be '{id}'", self.manifest.display());
         }
         let kind = node.kind;
@@ -225,6 +228,17 @@ impl Builder {
         Ok(first)
     }
 
+    /// Hashes `paths` on every core up front (500 clips are hundreds of MB); a file that cannot
+    /// be read is left for [`Builder::hash`] to report with the job that needs it.
+    fn hash_all(&mut self, paths: &[PathBuf]) {
+        use rayon::prelude::*;
+        let hashed: Vec<(PathBuf, String)> = paths
+            .par_iter()
+            .filter_map(|p| Some((p.clone(), sha256_hex(&std::fs::read(p).ok()?))))
+            .collect();
+        self.hashes.extend(hashed);
+    }
+
     /// Hex SHA-256 of a file's bytes (once per file).
     fn hash(&mut self, path: &Path, job: &str) -> Result<String> {
         if let Some(h) = self.hashes.get(path) {
@@ -237,13 +251,36 @@ impl Builder {
                 path.display()
             )
         })?;
-        let h: String = Sha256::digest(&bytes)
-            .iter()
-            .map(|b| format!("{b:02x}"))
-            .collect();
+        let h = sha256_hex(&bytes);
         self.hashes.insert(path.to_path_buf(), h.clone());
         Ok(h)
     }
+}
+
+fn sha256_hex(bytes: &[u8]) -> String {
+    Sha256::digest(bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
+
+/// Every file the manifest names (body, meshes and their sidecars, fabric files, clips, maps).
+fn files(r: &Resolved) -> Vec<PathBuf> {
+    let m = &r.manifest;
+    let mut files = vec![m.body.clone()];
+    for g in &m.garments {
+        files.push(g.mesh.clone());
+        files.extend(sidecar(g));
+        files.push(PathBuf::from(&g.fabric));
+    }
+    for c in &r.clips {
+        files.push(c.path.clone());
+        files.extend(c.map.clone());
+    }
+    files.sort();
+    files.dedup();
+    files.retain(|f| f.is_file());
+    files
 }
 
 fn rel(out: &Path, p: &Path) -> String {

@@ -239,48 +239,52 @@ pub fn run_local(
         .enumerate()
         .map(|(i, j)| (j.id.as_str(), i))
         .collect();
+    // Each job waits for `waiting[i]` dependencies; `blocked[i]` names one that did not succeed.
+    let mut waiting: Vec<usize> = plan.jobs.iter().map(|j| j.deps.len()).collect();
+    let mut dependents: Vec<Vec<usize>> = vec![vec![]; n];
+    for (i, j) in plan.jobs.iter().enumerate() {
+        for d in &j.deps {
+            dependents[index[d.as_str()]].push(i);
+        }
+    }
+    let mut blocked: Vec<Option<String>> = vec![None; n];
+    let mut ready: std::collections::VecDeque<usize> =
+        (0..n).filter(|&i| waiting[i] == 0).collect();
     let mut outcomes: Vec<Option<Outcome>> = vec![None; n];
-    let mut started = vec![false; n];
     let (tx, rx) = std::sync::mpsc::channel::<(usize, Outcome)>();
     std::thread::scope(|scope| {
         let mut running = 0;
         let mut finished = 0;
         while finished < n {
-            for i in 0..n {
-                if started[i] {
-                    continue;
-                }
-                let job = &plan.jobs[i];
-                let deps: Vec<&Option<Outcome>> = job
-                    .deps
-                    .iter()
-                    .map(|d| &outcomes[index[d.as_str()]])
-                    .collect();
-                if let Some(bad) = deps.iter().flat_map(|o| o.iter()).find(|o| !o.status.ok()) {
-                    started[i] = true;
-                    let o = Outcome::skipped(job, &bad.id);
-                    done(&o);
-                    outcomes[i] = Some(o);
-                    finished += 1;
-                    continue;
-                }
-                if running < jobs.max(1) && deps.iter().all(|o| o.is_some()) {
-                    started[i] = true;
-                    running += 1;
-                    let tx = tx.clone();
-                    scope.spawn(move || {
-                        let _ = tx.send((i, run_job(job, exe, retries)));
-                    });
-                }
-            }
-            if finished == n {
-                break;
+            while running < jobs.max(1) {
+                let Some(i) = ready.pop_front() else { break };
+                running += 1;
+                let (tx, job) = (tx.clone(), &plan.jobs[i]);
+                scope.spawn(move || {
+                    let _ = tx.send((i, run_job(job, exe, retries)));
+                });
             }
             let (i, o) = rx.recv().expect("a job thread reports");
             running -= 1;
-            finished += 1;
-            done(&o);
-            outcomes[i] = Some(o);
+            // The finished job, then any dependents that are now skipped, in turn.
+            let mut ended = vec![(i, o)];
+            while let Some((i, o)) = ended.pop() {
+                finished += 1;
+                done(&o);
+                for &k in &dependents[i] {
+                    if !o.status.ok() && blocked[k].is_none() {
+                        blocked[k] = Some(o.id.clone());
+                    }
+                    waiting[k] -= 1;
+                    if waiting[k] == 0 {
+                        match &blocked[k] {
+                            Some(up) => ended.push((k, Outcome::skipped(&plan.jobs[k], up))),
+                            None => ready.push_back(k),
+                        }
+                    }
+                }
+                outcomes[i] = Some(o);
+            }
         }
     });
     outcomes
