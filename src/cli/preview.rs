@@ -6,12 +6,12 @@ use crate::eval::model_frames;
 use crate::garment::Garment;
 use crate::io::gltf_body::read_body;
 use crate::models::file::{self, check_skeleton};
-use crate::motion::{load_clip, read_maps};
+use crate::motion::{chain, load_clip, read_maps};
 use crate::preview::{
     contact_sheet, save_png, DrawMesh, ErrorBands, FramingMode, Panel, SheetOptions, View,
     BODY_GREY, GARMENT_COLORS,
 };
-use crate::rig::{JointTransform, SkelAnimation};
+use crate::rig::{JointTransform, Skeleton};
 use anyhow::{bail, Result};
 use serde::Serialize;
 use std::path::PathBuf;
@@ -27,9 +27,14 @@ pub struct Args {
     /// Skinned body (glTF/glb).
     #[arg(long)]
     pub body: PathBuf,
-    /// BVH clip to pose the body with (rest pose when omitted).
-    #[arg(long)]
-    pub motion: Option<PathBuf>,
+    /// BVH clip to pose the body with (rest pose when omitted). Several play one after another
+    /// as one sequence, each later clip blended in over --fade frames (as `rollout` chains
+    /// them), so a chained roll-out's cache can be shown.
+    #[arg(long = "motion")]
+    pub motions: Vec<PathBuf>,
+    /// Frames over which a later --motion clip blends in from the previous clip's last pose.
+    #[arg(long, default_value_t = 15)]
+    pub fade: usize,
     /// Joint-name map(s) for the clip (TOML).
     #[arg(long = "map")]
     pub maps: Vec<PathBuf>,
@@ -163,28 +168,21 @@ fn render(args: &Args) -> Result<Report> {
         .iter()
         .map(|p| Garment::read(p))
         .collect::<Result<Vec<_>>>()?;
-    let poses: Vec<(String, Vec<JointTransform>, usize)> = match &args.motion {
-        Some(path) => {
-            if garments.len() != args.caches.len() {
-                bail!("with --motion each --garment needs its --cache (a point cache from simulate or eval), or a trained model: --model");
-            }
-            let clip = load_clip(path, &read_maps(&args.maps)?, &body.skeleton, args.fps)?;
-            let frames = pick_frames(clip.animation.frame_count(), args.frames, &args.frame_list)?;
-            frames
-                .iter()
-                .map(|&f| {
-                    (
-                        frame_label(&clip.animation, f),
-                        clip.animation.local_pose(f),
-                        f,
-                    )
-                })
-                .collect()
+    let poses: Vec<(String, Vec<JointTransform>, usize)> = if args.motions.is_empty() {
+        if !args.caches.is_empty() {
+            bail!("--cache plays a garment over a clip: add --motion");
         }
-        None if !args.caches.is_empty() => {
-            bail!("--cache plays a garment over a clip: add --motion")
+        vec![("rest".to_string(), body.skeleton.rest.clone(), 0)]
+    } else {
+        if garments.len() != args.caches.len() {
+            bail!("with --motion each --garment needs its --cache (a point cache from simulate or eval), or a trained model: --model");
         }
-        None => vec![("rest".to_string(), body.skeleton.rest.clone(), 0)],
+        let (fps, sequence) = played(args, &body.skeleton)?;
+        let frames = pick_frames(sequence.len(), args.frames, &args.frame_list)?;
+        frames
+            .iter()
+            .map(|&f| (frame_label(fps, f), sequence[f].clone(), f))
+            .collect()
     };
     let caches = args
         .caches
@@ -337,9 +335,33 @@ fn render(args: &Args) -> Result<Report> {
     })
 }
 
-fn frame_label(anim: &SkelAnimation, frame: usize) -> String {
+fn frame_label(fps: f32, frame: usize) -> String {
     // Short: the panel is narrow and the clip name is in the file name.
-    format!("f{} {:.2}s", frame, frame as f32 / anim.fps)
+    format!("f{} {:.2}s", frame, frame as f32 / fps)
+}
+
+/// The --motion clips' poses one after another (`motion::chain`) and their shared rate.
+fn played(args: &Args, skeleton: &Skeleton) -> Result<(f32, Vec<Vec<JointTransform>>)> {
+    let maps = read_maps(&args.maps)?;
+    let clips = args
+        .motions
+        .iter()
+        .map(|m| Ok(load_clip(m, &maps, skeleton, args.fps)?.animation))
+        .collect::<Result<Vec<_>>>()?;
+    let fps = clips.first().map_or(30.0, |c| c.fps);
+    if let Some((m, c)) = args
+        .motions
+        .iter()
+        .zip(&clips)
+        .find(|(_, c)| (c.fps - fps).abs() > 1e-3)
+    {
+        bail!(
+            "{}: plays at {} fps, the first clip at {fps}: give --fps to play them at one rate",
+            m.display(),
+            c.fps
+        );
+    }
+    Ok((fps, chain(&clips.iter().collect::<Vec<_>>(), args.fade)))
 }
 
 /// The frames to show: an explicit list, or `count` evenly spaced ones (first and last included).

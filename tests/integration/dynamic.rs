@@ -344,6 +344,7 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
     let v = &plain["reference"];
     assert!(v["one_step_mm"].as_f64().unwrap() < 2.0 * f + 1.0, "{v}");
     gltf_replays_the_roll_out(&dir, &model, &sim, &out);
+    previews_side_by_side(&dir, &sim, &out);
     // A wide clearance makes the fix fire on every frame; it must cut the collision loss.
     let fixed_out = dir.join("fixed.pc2");
     let fixed = roll_out(
@@ -460,4 +461,68 @@ fn rollout_refuses_a_space_only_model_and_a_cache_of_another_mesh() {
     assert!(err.contains("body.pc2") && err.contains("2808"), "{err}");
     let err = fails_to(&model, "rest", &dir.join("never.obj"));
     assert!(err.contains(".pc2") && err.contains(".glb"), "{err}");
+}
+
+/// `preview --side-by-side --error-vs`: one panel per cache and frame; the simulation against
+/// itself is all in the lowest error band. Two --motion clips play as one sequence.
+fn previews_side_by_side(dir: &Path, sim: &Path, roll: &Path) {
+    let png = dir.join("side.png");
+    let skirt = "samples/garments/skirt.obj";
+    let (s, r, p) = (
+        sim.to_str().unwrap(),
+        roll.to_str().unwrap(),
+        png.to_str().unwrap(),
+    );
+    let report = garmentbake_json(&[
+        "preview",
+        "--body",
+        "samples/body.glb",
+        "--motion",
+        "samples/motions/131_01.bvh",
+        "--fps",
+        "30",
+        "--garment",
+        skirt,
+        "--cache",
+        r,
+        "--garment",
+        skirt,
+        "--cache",
+        s,
+        "--side-by-side",
+        "--error-vs",
+        s,
+        "--frame-list",
+        "0,5",
+        "--views",
+        "front",
+        "--out",
+        p,
+        "--json",
+    ]);
+    assert_eq!(report["panels"], 4, "{report}");
+    // Chained: 131_01 (249 frames at 30 fps) twice has a frame 260, once it has not.
+    let frame = "260";
+    let motion = "samples/motions/131_01.bvh";
+    let base = [
+        "preview",
+        "--body",
+        "samples/body.glb",
+        "--fps",
+        "30",
+        "--views",
+        "front",
+        "--out",
+        p,
+        "--frame-list",
+        frame,
+    ];
+    let one = garmentbake_in_root(&[&base[..], &["--motion", motion]].concat());
+    assert_eq!(one.status.code(), Some(2), "one clip has no frame {frame}");
+    let two = garmentbake_in_root(&[&base[..], &["--motion", motion, "--motion", motion]].concat());
+    assert!(
+        two.status.success(),
+        "{}",
+        String::from_utf8_lossy(&two.stderr)
+    );
 }
