@@ -49,29 +49,31 @@ pub struct Comparison {
     pub inside: Vec<Inside>,
 }
 
-/// Mean metrics of several garment series (e.g. model and plain LBS) over the same poses; the
-/// body is posed one frame at a time so long clips need little memory.
-pub fn compare(
+/// One frame's figures of several garment series (e.g. model and plain LBS).
+pub struct FrameComparison {
+    metrics: Vec<Metrics>,
+    strain: Vec<f64>,
+    body_strain: f64,
+    overlap: usize,
+    inside: Vec<InsideFrame>,
+}
+
+/// Per-frame figures of several garment series over the same poses (the body posed one frame at
+/// a time, so long clips need little memory): [`Comparison::of`] any subset of them.
+pub fn compare_frames(
     geometry: &ClothGeometry,
     series: &[&[Vec<[f32; 3]>]],
     body: &Body,
     body_under: &Edges,
     poses: &[Vec<JointTransform>],
-) -> Comparison {
-    struct Frame {
-        metrics: Vec<Metrics>,
-        strain: Vec<f64>,
-        body_strain: f64,
-        overlap: usize,
-        inside: Vec<InsideFrame>,
-    }
-    let per_frame: Vec<Frame> = poses
+) -> Vec<FrameComparison> {
+    poses
         .par_iter()
         .enumerate()
         .map(|(f, pose)| {
             let posed = PosedBody::new(body, pose);
             let surface = SurfaceIndex::new(&posed.points, &body.mesh.triangles);
-            Frame {
+            FrameComparison {
                 inside: series
                     .iter()
                     .map(|s| InsideFrame::of(&s[f], &posed, &surface))
@@ -88,24 +90,39 @@ pub fn compare(
                 overlap: posed.overlap.iter().filter(|&&o| o).count(),
             }
         })
-        .collect();
-    let frames = per_frame.len().max(1) as f64;
-    Comparison {
-        metrics: (0..series.len())
-            .map(|k| Metrics::mean(&per_frame.iter().map(|m| m.metrics[k]).collect::<Vec<_>>()))
-            .collect(),
-        strain_pct: (0..series.len())
-            .map(|k| per_frame.iter().map(|m| m.strain[k]).sum::<f64>() / frames)
-            .collect(),
-        body_strain_pct: per_frame.iter().map(|m| m.body_strain).sum::<f64>() / frames,
-        body_overlap: per_frame.iter().map(|m| m.overlap).collect(),
-        inside: (0..series.len())
-            .map(|k| {
-                let frames: Vec<&InsideFrame> = per_frame.iter().map(|m| &m.inside[k]).collect();
-                Inside::of(&frames)
-            })
-            .collect(),
+        .collect()
+}
+
+impl Comparison {
+    /// Means over `frames` of `series` series.
+    pub fn of(frames: &[&FrameComparison], series: usize) -> Comparison {
+        let n = frames.len().max(1) as f64;
+        Comparison {
+            metrics: (0..series)
+                .map(|k| Metrics::mean(&frames.iter().map(|m| m.metrics[k]).collect::<Vec<_>>()))
+                .collect(),
+            strain_pct: (0..series)
+                .map(|k| frames.iter().map(|m| m.strain[k]).sum::<f64>() / n)
+                .collect(),
+            body_strain_pct: frames.iter().map(|m| m.body_strain).sum::<f64>() / n,
+            body_overlap: frames.iter().map(|m| m.overlap).collect(),
+            inside: (0..series)
+                .map(|k| Inside::of(&frames.iter().map(|m| &m.inside[k]).collect::<Vec<_>>()))
+                .collect(),
+        }
     }
+}
+
+/// Mean figures of several garment series over the same poses ([`compare_frames`], all frames).
+pub fn compare(
+    geometry: &ClothGeometry,
+    series: &[&[Vec<[f32; 3]>]],
+    body: &Body,
+    body_under: &Edges,
+    poses: &[Vec<JointTransform>],
+) -> Comparison {
+    let frames = compare_frames(geometry, series, body, body_under, poses);
+    Comparison::of(&frames.iter().collect::<Vec<_>>(), series.len())
 }
 
 /// How far each frame of a clip lies from the poses a model was trained on.

@@ -3,7 +3,7 @@
 use super::args::write_cache;
 use super::args::{ClipArgs, ComputeArgs, OutputArgs};
 use super::Execute;
-use crate::eval::{compare, lbs_frames, model_frames, ClipCoverage, Comparison};
+use crate::eval::{compare_frames, lbs_frames, model_frames, ClipCoverage, Comparison};
 use crate::io::gltf_body::read_body;
 use crate::metrics::{body_edges_under, ClothGeometry, Inside, Metrics};
 use crate::models::coverage::{Coverage, OutsideWeights};
@@ -202,7 +202,9 @@ impl Execute for Args {
         let lbs = lbs_frames(&model.lbs, &model.garment.positions, &body.skeleton, &poses);
         let geometry = ClothGeometry::new(&model.garment, model.info.fabric.density);
         let under = body_edges_under(&body, &model.garment.positions, UNDER);
-        let comparison = compare(&geometry, &[&garment, &lbs], &body, &under, &poses);
+        // Per frame once: the coverage split below means subsets of the same figures.
+        let per_frame = compare_frames(&geometry, &[&garment, &lbs], &body, &under, &poses);
+        let comparison = Comparison::of(&per_frame.iter().collect::<Vec<_>>(), 2);
         write_cache(&self.out, &model.garment, &garment, anim.fps)?;
         if let Some(path) = &self.body_out {
             let frames: Vec<Vec<[f32; 3]>> = poses
@@ -231,12 +233,8 @@ impl Execute for Args {
             let clip = ClipCoverage::of(c, &network.feature_joints, &poses);
             let split = |frames: Vec<usize>| {
                 (!frames.is_empty()).then(|| {
-                    let pick = |s: &[Vec<[f32; 3]>]| {
-                        frames.iter().map(|&f| s[f].clone()).collect::<Vec<_>>()
-                    };
-                    let (g, l) = (pick(&garment), pick(&lbs));
-                    let p: Vec<_> = frames.iter().map(|&f| poses[f].clone()).collect();
-                    let c = compare(&geometry, &[&g, &l], &body, &under, &p);
+                    let picked: Vec<_> = frames.iter().map(|&f| &per_frame[f]).collect();
+                    let c = Comparison::of(&picked, 2);
                     Split {
                         frames: frames.len(),
                         metrics: SeriesMetrics::of(&c),
