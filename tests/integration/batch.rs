@@ -303,14 +303,16 @@ fn a_bad_manifest_is_one_error_line_naming_it() {
     assert!(err.contains("batch.toml") && err.contains("epoch"), "{err}");
 }
 
-/// Stops the Ray cluster the test started, also when the test fails.
+/// Stops the Ray cluster the test started and removes its temp folder, also when the test fails.
 struct RayCluster {
     ray: PathBuf,
+    temp: PathBuf,
 }
 
 impl Drop for RayCluster {
     fn drop(&mut self) {
         let _ = Command::new(&self.ray).args(["stop", "--force"]).output();
+        let _ = std::fs::remove_dir_all(&self.temp);
     }
 }
 
@@ -341,7 +343,10 @@ fn ray_runs_the_same_bytes_as_the_local_runner() {
         .arg(&temp)
         .output()
         .expect("ray is installed in .venv by scripts/setup.sh");
-    let _cluster = RayCluster { ray: ray.clone() };
+    let _cluster = RayCluster {
+        ray: ray.clone(),
+        temp: temp.clone(),
+    };
     assert!(
         started.status.success(),
         "ray start failed: {}",
