@@ -3,6 +3,7 @@
 use super::args::{write_cache, ComputeArgs, OutputArgs};
 use super::Execute;
 use crate::bake::sequence::{bake_sequence, SequenceReport};
+use crate::eval::lbs_frames;
 use crate::geometry::PointIndex;
 use crate::io::point_cache::read_pc2;
 use crate::motion::{chain, load_clip, read_maps};
@@ -294,7 +295,11 @@ impl Execute for Args {
             })
             .transpose()?;
         let lbs = (self.lbs_out.is_some() || reference.is_some())
-            .then(|| lbs_frames(&file, &poses))
+            .then(|| {
+                let skin = Self::garment_skin(&file)?;
+                let rest = &file.garment.positions;
+                Ok::<_, anyhow::Error>(lbs_frames(&skin, rest, skeleton, &poses))
+            })
             .transpose()?;
         if let (Some(path), Some(lbs)) = (&self.lbs_out, &lbs) {
             write_cache(path, &file.garment, lbs, fps)?;
@@ -472,19 +477,6 @@ impl Args {
             .with_context(|| format!("writing {}", self.out.display()))?;
         Ok(report)
     }
-}
-
-/// Plain LBS of the rest garment at every pose.
-fn lbs_frames(
-    file: &crate::models::file::ModelFile,
-    poses: &[Vec<crate::rig::JointTransform>],
-) -> Result<Vec<Vec<[f32; 3]>>> {
-    let skin = Args::garment_skin(file)?;
-    let skeleton = &file.body.skeleton;
-    Ok(poses
-        .iter()
-        .map(|p| skin.skin_points(&file.garment.positions, &skeleton.skinning_matrices(p)))
-        .collect())
 }
 
 fn mean_mm(per_frame: &[f64]) -> f64 {
