@@ -3,6 +3,7 @@
 //! (JSON, schema in docs/batch.md) so any engine can run it: the local runner, Ray, a farm.
 
 use super::manifest::{BakeSpec, Clip, Garment, Resolved};
+use crate::io::digest::{sha256_hex, to_hex};
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
@@ -202,7 +203,7 @@ impl Builder {
             record_input(self, p, &mut part)?;
         }
         text.push("--json".into());
-        let key: String = h.finalize().iter().map(|b| format!("{b:02x}")).collect();
+        let key = to_hex(&h.finalize());
         let file = id.replace(':', ".");
         for o in &outputs {
             self.producers.insert(o.clone(), self.jobs.len());
@@ -255,13 +256,6 @@ impl Builder {
         self.hashes.insert(path.to_path_buf(), h.clone());
         Ok(h)
     }
-}
-
-fn sha256_hex(bytes: &[u8]) -> String {
-    Sha256::digest(bytes)
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect()
 }
 
 /// Every file the manifest names (body, meshes and their sidecars, fabric files, clips, maps).

@@ -33,7 +33,7 @@ pub fn key(files: &super::blender::JobFiles) -> String {
         h.update((bytes.len() as u64).to_le_bytes());
         h.update(bytes);
     }
-    h.finalize().iter().map(|b| format!("{b:02x}")).collect()
+    crate::io::digest::to_hex(&h.finalize())
 }
 
 fn paths(dir: &Path, key: &str) -> (PathBuf, PathBuf) {
