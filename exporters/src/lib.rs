@@ -115,6 +115,19 @@ pub fn write_point_cache(cache: &PointCache, path: &Path) -> Result<(), ExportEr
     }
 }
 
+/// Writes several point caches of one shot (e.g. a garment and the posed body it moves on) into
+/// one USD stage, one `Mesh` each; PC2 and MDD hold a single mesh, so other extensions are refused.
+pub fn write_point_caches(caches: &[PointCache], path: &Path) -> Result<(), ExportError> {
+    match FileKind::written(path) {
+        Some(FileKind::Usd) => write_usd_caches(caches, path),
+        _ => Err(wrong_extension(
+            path,
+            "several-mesh point-cache ",
+            &[FileKind::Usd],
+        )),
+    }
+}
+
 /// "unknown {what}extension; use .a, .b or .c" for the written extensions of `kinds`.
 fn wrong_extension(path: &Path, what: &str, kinds: &[FileKind]) -> ExportError {
     let list = FileKind::extension_list(kinds, true);
@@ -135,7 +148,12 @@ fn write_usd(asset: &BakedAsset, path: &Path) -> Result<(), ExportError> {
 
 #[cfg(feature = "usd")]
 fn write_usd_cache(cache: &PointCache, path: &Path) -> Result<(), ExportError> {
-    Ok(usd::write_point_cache(cache, path)?)
+    write_usd_caches(std::slice::from_ref(cache), path)
+}
+
+#[cfg(feature = "usd")]
+fn write_usd_caches(caches: &[PointCache], path: &Path) -> Result<(), ExportError> {
+    Ok(usd::write_point_caches(caches, path)?)
 }
 
 #[cfg(not(feature = "usd"))]
@@ -148,5 +166,10 @@ fn write_usd(_: &BakedAsset, path: &Path) -> Result<(), ExportError> {
 
 #[cfg(not(feature = "usd"))]
 fn write_usd_cache(_: &PointCache, path: &Path) -> Result<(), ExportError> {
+    Err(unsupported(path, NO_USD))
+}
+
+#[cfg(not(feature = "usd"))]
+fn write_usd_caches(_: &[PointCache], path: &Path) -> Result<(), ExportError> {
     Err(unsupported(path, NO_USD))
 }

@@ -41,12 +41,39 @@ pub fn write(asset: &BakedAsset, path: &Path) -> Result<(), UsdError> {
         .and_then(|spec| author("write_skel", &spec, path))
 }
 
-/// Writes a point cache as one `Mesh` with `points` and `extent` sampled at every frame.
-pub fn write_point_cache(cache: &PointCache, path: &Path) -> Result<(), UsdError> {
+/// Writes point caches of one shot with `points` and `extent` sampled at every frame: one cache
+/// is the stage's root `Mesh` (named after the file); several (a garment and the posed body) are
+/// `Mesh` prims named after their caches under a root `Xform`, on one timeline.
+pub fn write_point_caches(caches: &[PointCache], path: &Path) -> Result<(), UsdError> {
     check_extension(path)
-        .and_then(|()| cache.check())
+        .and_then(|()| same_timeline(caches))
+        .and_then(|()| caches.iter().try_for_each(PointCache::check))
         .map_err(invalid(path))?;
-    author("write_point_cache", &point_cache_spec(cache), path)
+    author(
+        "write_point_cache",
+        &point_caches_spec(caches, &root_name(path)),
+        path,
+    )
+}
+
+/// Caches sharing a stage share its rate and frame range.
+fn same_timeline(caches: &[PointCache]) -> Result<(), String> {
+    let first = caches.first().ok_or("no point cache to write")?;
+    match caches
+        .iter()
+        .find(|c| c.fps != first.fps || c.frame_count() != first.frame_count())
+    {
+        Some(c) => Err(format!(
+            "point caches '{}' ({} frames at {} fps) and '{}' ({} at {}) do not share a timeline",
+            first.name,
+            first.frame_count(),
+            first.fps,
+            c.name,
+            c.frame_count(),
+            c.fps
+        )),
+        None => Ok(()),
+    }
 }
 
 /// A reason the input cannot be written to `path`, as the error.
@@ -364,22 +391,41 @@ fn animation_spec<'a>(
     ])
 }
 
-fn point_cache_spec(cache: &PointCache) -> Value<'_> {
-    let frames = cache.frame_count();
-    let extents: Vec<f32> = (0..frames)
-        .flat_map(|f| extent(cache.frame(f)).into_iter().flatten())
+fn point_caches_spec<'a>(caches: &'a [PointCache], root: &str) -> Value<'a> {
+    let frames = caches[0].frame_count();
+    let mut taken = HashSet::from([root.to_string()]);
+    let meshes = caches
+        .iter()
+        .map(|c| mesh_cache_spec(c, &unique(&c.name, &mut taken)))
         .collect();
     Value::Dict(vec![
-        ("root", identifier(&cache.name).into()),
-        ("fps", Value::Float(cache.fps as f64)),
+        // One cache keeps its own name as the root (as a lone PC2's mesh would be named).
+        (
+            "root",
+            match caches {
+                [one] => identifier(&one.name).into(),
+                _ => root.to_string().into(),
+            },
+        ),
+        ("fps", Value::Float(caches[0].fps as f64)),
         ("start", Value::Float(0.0)),
         ("end", Value::Float(frames.saturating_sub(1) as f64)),
         ("provenance", Value::List(Vec::new())),
-        ("point_count", Value::Int(cache.point_count as i64)),
         (
             "times",
             Value::List((0..frames).map(|f| Value::Float(f as f64)).collect()),
         ),
+        ("meshes", Value::List(meshes)),
+    ])
+}
+
+fn mesh_cache_spec<'a>(cache: &'a PointCache, name: &str) -> Value<'a> {
+    let extents: Vec<f32> = (0..cache.frame_count())
+        .flat_map(|f| extent(cache.frame(f)).into_iter().flatten())
+        .collect();
+    Value::Dict(vec![
+        ("name", name.to_string().into()),
+        ("point_count", Value::Int(cache.point_count as i64)),
         ("points", f32s(&cache.points)),
         ("extents", Value::F32(Cow::Owned(extents))),
         ("face_indices", triangles(&cache.triangles)),

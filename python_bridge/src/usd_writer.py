@@ -194,18 +194,31 @@ def _animation(stage, path, a, joints):
 
 
 def write_point_cache(spec, path):
-    """One Mesh whose `points` and `extent` are sampled at every frame (the USD form of a PC2)."""
+    """Meshes whose `points` and `extent` are sampled at every frame (the USD form of a PC2): one
+    mesh is the root prim, several are children of a root Xform (a garment and its body)."""
     stage = _stage(spec)
-    mesh = UsdGeom.Mesh.Define(stage, Sdf.Path("/" + spec["root"]))
-    stage.SetDefaultPrim(mesh.GetPrim())
-    _mesh_topology(mesh, spec)
+    root = Sdf.Path("/" + spec["root"])
+    meshes = spec["meshes"]
+    if len(meshes) == 1:
+        prims = [(root, meshes[0])]
+    else:
+        UsdGeom.Xform.Define(stage, root)
+        prims = [(root.AppendChild(m["name"]), m) for m in meshes]
+    for prim_path, m in prims:
+        _mesh_cache(stage, prim_path, m, spec["times"])
+    stage.SetDefaultPrim(stage.GetPrimAtPath(root))
+    _export(stage, path)
+
+
+def _mesh_cache(stage, prim_path, m, times):
+    mesh = UsdGeom.Mesh.Define(stage, prim_path)
+    _mesh_topology(mesh, m)
     points = mesh.CreatePointsAttr()
     extent = mesh.CreateExtentAttr()
-    n = spec["point_count"]
+    n = m["point_count"]
     # Setting values on attributes that already exist: batching the notices is safe and cheaper.
     with Sdf.ChangeBlock():
-        for f, t in enumerate(spec["times"]):
+        for f, t in enumerate(times):
             time = Usd.TimeCode(t)
-            points.Set(Vt.Vec3fArray.FromBuffer(_chunk(spec["points"], f, 3 * n)), time)
-            extent.Set(Vt.Vec3fArray.FromBuffer(_chunk(spec["extents"], f, 6)), time)
-    _export(stage, path)
+            points.Set(Vt.Vec3fArray.FromBuffer(_chunk(m["points"], f, 3 * n)), time)
+            extent.Set(Vt.Vec3fArray.FromBuffer(_chunk(m["extents"], f, 6)), time)

@@ -219,16 +219,32 @@ pub fn write_cache(
     frames: &[Vec<[f32; 3]>],
     fps: f32,
 ) -> Result<()> {
-    let cache = exporters::PointCache {
-        name: path
-            .file_stem()
-            .map_or("cache".into(), |s| s.to_string_lossy().into_owned()),
-        fps,
-        triangles: mesh.triangles.clone(),
-        uvs: None,
-        point_count: mesh.vertex_count(),
-        points: frames.iter().flatten().copied().collect(),
-    };
-    exporters::write_point_cache(&cache, path)
-        .with_context(|| format!("writing {}", path.display()))
+    let name = path
+        .file_stem()
+        .map_or("cache".into(), |s| s.to_string_lossy().into_owned());
+    write_caches(path, &[(&name, mesh, frames)], fps)
+}
+
+/// A named mesh and its frames, one entry of [`write_caches`].
+pub type NamedFrames<'a> = (&'a str, &'a crate::geometry::TriMesh, &'a [Vec<[f32; 3]>]);
+
+/// Several meshes' frames of one shot (a garment and the body it moves on), each named, in one
+/// file: a USD stage (one mesh: any point-cache format).
+pub fn write_caches(path: &Path, meshes: &[NamedFrames], fps: f32) -> Result<()> {
+    let caches: Vec<exporters::PointCache> = meshes
+        .iter()
+        .map(|&(name, mesh, frames)| exporters::PointCache {
+            name: name.into(),
+            fps,
+            triangles: mesh.triangles.clone(),
+            uvs: None,
+            point_count: mesh.vertex_count(),
+            points: frames.iter().flatten().copied().collect(),
+        })
+        .collect();
+    match caches.as_slice() {
+        [one] => exporters::write_point_cache(one, path),
+        all => exporters::write_point_caches(all, path),
+    }
+    .with_context(|| format!("writing {}", path.display()))
 }

@@ -207,13 +207,7 @@ impl Execute for Args {
         let comparison = Comparison::of(&per_frame.iter().collect::<Vec<_>>(), 2);
         write_cache(&self.out, &model.garment, &garment, anim.fps)?;
         if let Some(path) = &self.body_out {
-            let frames: Vec<Vec<[f32; 3]>> = poses
-                .iter()
-                .map(|p| {
-                    body.skin
-                        .skin_points(&body.mesh.positions, &body.skeleton.skinning_matrices(p))
-                })
-                .collect();
+            let frames = lbs_frames(&body.skin, &body.mesh.positions, &body.skeleton, &poses);
             write_cache(path, &body.mesh, &frames, anim.fps)?;
         }
         let view = match &self.view {

@@ -1,6 +1,6 @@
 //! `garmentbake rollout`: a dynamic model played over clips frame by frame, written as a point cache.
 
-use super::args::{write_cache, ComputeArgs, OutputArgs};
+use super::args::{write_cache, write_caches, ComputeArgs, OutputArgs};
 use super::Execute;
 use crate::bake::sequence::{bake_sequence, SequenceReport};
 use crate::eval::lbs_frames;
@@ -64,6 +64,11 @@ pub struct Args {
     /// Also write the posed body per frame as a point cache.
     #[arg(long)]
     pub body_out: Option<PathBuf>,
+    /// USD --out: put the posed body in the same stage, beside the garment (`/NAME/garment`,
+    /// `/NAME/body`, one timeline), so the shot opens in usdview or a DCC with the body it was
+    /// rolled out on.
+    #[arg(long)]
+    pub with_body: bool,
     /// A simulated cache of the same (single) clip to measure the roll-out against (and plain
     /// LBS beside it).
     #[arg(long)]
@@ -198,6 +203,13 @@ impl Execute for Args {
                 FileKind::extension_list(&kinds, true)
             );
         }
+        if self.with_body && kind != Some(FileKind::Usd) {
+            bail!(
+                "{}: --with-body needs a USD --out ({}): PC2, MDD and glTF caches hold one mesh (use --body-out)",
+                self.out.display(),
+                FileKind::extension_list(&[FileKind::Usd], true)
+            );
+        }
         if let Some(page) = &self.view {
             super::view::check_page_path(page)?;
         }
@@ -272,11 +284,25 @@ impl Execute for Args {
             &[],
             None,
         );
-        let baked = if kind == Some(FileKind::Gltf) {
-            Some(self.write_gltf(&file, &poses, &rollout.frames, fps, say)?)
-        } else {
-            write_cache(&self.out, &file.garment, &rollout.frames, fps)?;
-            None
+        let body = &file.body;
+        let bodies = (self.body_out.is_some() || self.with_body)
+            .then(|| lbs_frames(&body.skin, &body.mesh.positions, skeleton, &poses));
+        let baked = match (kind, &bodies) {
+            (Some(FileKind::Gltf), _) => {
+                Some(self.write_gltf(&file, &poses, &rollout.frames, fps, say)?)
+            }
+            (_, Some(b)) if self.with_body => {
+                let meshes = [
+                    ("garment", &file.garment, rollout.frames.as_slice()),
+                    ("body", &body.mesh, b.as_slice()),
+                ];
+                write_caches(&self.out, &meshes, fps)?;
+                None
+            }
+            _ => {
+                write_cache(&self.out, &file.garment, &rollout.frames, fps)?;
+                None
+            }
         };
         // A point cache holds the frames themselves; a glTF's vertices are the bake's (structure).
         let validation = self
@@ -304,17 +330,8 @@ impl Execute for Args {
         if let (Some(path), Some(lbs)) = (&self.lbs_out, &lbs) {
             write_cache(path, &file.garment, lbs, fps)?;
         }
-        if let Some(path) = &self.body_out {
-            let bodies: Vec<Vec<[f32; 3]>> = poses
-                .iter()
-                .map(|p| {
-                    let skinning = skeleton.skinning_matrices(p);
-                    file.body
-                        .skin
-                        .skin_points(&file.body.mesh.positions, &skinning)
-                })
-                .collect();
-            write_cache(path, &file.body.mesh, &bodies, fps)?;
+        if let (Some(path), Some(b)) = (&self.body_out, &bodies) {
+            write_cache(path, &body.mesh, b, fps)?;
         }
         let view = match &self.view {
             Some(page) => {

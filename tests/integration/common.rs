@@ -164,6 +164,17 @@ pub fn max_distance(a: &[[f32; 3]], b: &[[f32; 3]]) -> f32 {
         .fold(0.0, f32::max)
 }
 
+/// Raw little-endian f32 frames (what tools/usd/check.py reads as `--reference`).
+pub fn write_reference(path: &Path, frames: impl IntoIterator<Item = Vec<[f32; 3]>>) {
+    let bytes: Vec<u8> = frames
+        .into_iter()
+        .flatten()
+        .flatten()
+        .flat_map(f32::to_le_bytes)
+        .collect();
+    std::fs::write(path, bytes).unwrap();
+}
+
 /// usd-core's own view of a USD file (tools/usd/check.py, run by the project venv's Python):
 /// (exit status 0, the JSON it printed).
 pub fn usd_check(args: &[&str]) -> (bool, serde_json::Value) {

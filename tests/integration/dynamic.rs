@@ -344,6 +344,7 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
     let v = &plain["reference"];
     assert!(v["one_step_mm"].as_f64().unwrap() < 2.0 * f + 1.0, "{v}");
     gltf_replays_the_roll_out(&dir, &model, &sim, &out);
+    usd_holds_the_roll_out_and_its_body(&dir, &model, &sim, &frames);
     previews_side_by_side(&dir, &sim, &out);
     // A wide clearance makes the fix fire on every frame; it must cut the collision loss.
     let fixed_out = dir.join("fixed.pc2");
@@ -415,6 +416,52 @@ fn gltf_replays_the_roll_out(dir: &Path, model: &Path, sim: &Path, roll: &Path) 
     );
 }
 
+/// `--with-body`: one USD stage with the garment and the posed body, read by pxr: both meshes'
+/// time-sampled points equal the roll-out (`frames`, written without the fix) and `--body-out`'s
+/// cache, and usd-core's validators find no error.
+fn usd_holds_the_roll_out_and_its_body(
+    dir: &Path,
+    model: &Path,
+    sim: &Path,
+    frames: &[Vec<[f32; 3]>],
+) {
+    let usd = dir.join("roll_body.usda");
+    let body_pc2 = dir.join("roll_body.pc2");
+    roll_out(
+        model,
+        sim,
+        &usd,
+        &[
+            "--no-collision-fix",
+            "--with-body",
+            "--body-out",
+            body_pc2.to_str().unwrap(),
+        ],
+    );
+    let (_, bodies) = exporters::pc2::read(&std::fs::read(&body_pc2).unwrap()).unwrap();
+    for (mesh, expected) in [("garment", frames), ("body", bodies.as_slice())] {
+        let reference = dir.join(format!("roll_{mesh}.f32"));
+        write_reference(&reference, expected.iter().cloned());
+        let (ok, points) = usd_check(&[
+            "points",
+            usd.to_str().unwrap(),
+            "--mesh",
+            mesh,
+            "--reference",
+            reference.to_str().unwrap(),
+        ]);
+        assert!(ok, "{points}");
+        assert_eq!(points["frames"], 6, "{points}");
+        assert!(
+            points["max_abs"].as_f64().unwrap() <= 1e-5,
+            "{mesh}: {points}"
+        );
+        assert_eq!(points["extent_ok"], true, "{points}");
+    }
+    let (valid, report) = usd_check(&["validate", usd.to_str().unwrap()]);
+    assert!(valid, "{report}");
+}
+
 #[test]
 fn rollout_refuses_a_space_only_model_and_a_cache_of_another_mesh() {
     if blender_skipped() {
@@ -461,6 +508,23 @@ fn rollout_refuses_a_space_only_model_and_a_cache_of_another_mesh() {
     assert!(err.contains("body.pc2") && err.contains("2808"), "{err}");
     let err = fails_to(&model, "rest", &dir.join("never.obj"));
     assert!(err.contains(".pc2") && err.contains(".glb"), "{err}");
+    // The body needs a file that holds two meshes.
+    let never = dir.join("never_body.pc2");
+    let o = garmentbake_in_root(&[
+        "rollout",
+        "--model",
+        model.to_str().unwrap(),
+        "--motion",
+        "samples/motions/131_01.bvh",
+        "--with-body",
+        "--out",
+        never.to_str().unwrap(),
+    ]);
+    let err = one_error_line(&o, &never);
+    assert!(
+        err.contains("--with-body") && err.contains(".usdc"),
+        "{err}"
+    );
 }
 
 /// `preview --side-by-side --error-vs`: one panel per cache and frame; the simulation against

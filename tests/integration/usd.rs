@@ -40,17 +40,6 @@ fn our_lbs(
     skin.skin_points(rest, &skinning)
 }
 
-/// Raw little-endian f32 frames (what tools/usd/check.py reads as `--reference`).
-fn write_reference(path: &Path, frames: impl IntoIterator<Item = Vec<[f32; 3]>>) {
-    let bytes: Vec<u8> = frames
-        .into_iter()
-        .flatten()
-        .flatten()
-        .flat_map(f32::to_le_bytes)
-        .collect();
-    std::fs::write(path, bytes).unwrap();
-}
-
 fn assert_valid(file: &Path) {
     let (ok, report) = usd_check(&["validate", file.to_str().unwrap()]);
     assert!(ok, "{}: {report}", file.display());

@@ -16,9 +16,10 @@ usage (the project venv's python: .venv/bin/python):
         query: UsdSkel.Cache -> SkinningQuery, BlendShapeQuery (blend shapes applied to the rest
                points, then ComputeSkinnedPoints with the skeleton's skinning transforms).
         bake:  UsdSkel.BakeSkinning on an in-memory copy, then reads the baked `points` samples.
-  check.py points FILE --reference REF.f32
-      the time-sampled `points` of the default prim (a Mesh) against REF.f32; also checks that
-      every `extent` sample bounds its points. Prints JSON {frames, points, max_abs, extent_ok}.
+  check.py points FILE [--mesh NAME] --reference REF.f32
+      the time-sampled `points` of the default prim (a Mesh), or of the Mesh NAME under it,
+      against REF.f32; also checks that every `extent` sample bounds its points. Prints JSON
+      {frames, points, max_abs, extent_ok}.
 """
 
 import argparse
@@ -221,9 +222,14 @@ def replay(path, mesh, clip, method, reference, stride):
     return 0
 
 
-def points(path, reference):
+def points(path, mesh_name, reference):
     stage = Usd.Stage.Open(path)
-    mesh = UsdGeom.Mesh(stage.GetDefaultPrim())
+    prim = stage.GetDefaultPrim()
+    if mesh_name:
+        prim = stage.GetPrimAtPath(prim.GetPath().AppendChild(mesh_name))
+    if not prim or not prim.IsA(UsdGeom.Mesh):
+        raise SystemExit("no mesh %s in %s" % (mesh_name or "as the default prim", path))
+    mesh = UsdGeom.Mesh(prim)
     attr = mesh.GetPointsAttr()
     times = attr.GetTimeSamples()
     frames = np.stack([np.asarray(attr.Get(t), dtype=np.float32) for t in times])
@@ -254,6 +260,7 @@ def main():
     r.add_argument("--stride", type=int, default=1)
     p = sub.add_parser("points")
     p.add_argument("file")
+    p.add_argument("--mesh")
     p.add_argument("--reference", required=True)
     a = ap.parse_args()
     if a.cmd == "validate":
@@ -262,7 +269,7 @@ def main():
         return info(a.file)
     if a.cmd == "replay":
         return replay(a.file, a.mesh, a.clip, a.method, a.reference, a.stride)
-    return points(a.file, a.reference)
+    return points(a.file, a.mesh, a.reference)
 
 
 if __name__ == "__main__":
