@@ -383,7 +383,7 @@ impl Space {
     /// Garments `g [B, V, 3]` with each vertex's seed-blended transform under `m` undone.
     pub fn unskin(&self, g: &Tensor, m: &Tensor) -> Tensor {
         let (rot, shift) = self.blended(m);
-        rot.inverse()
+        inverse3(&rot)
             .matmul(&(g - shift).unsqueeze(3))
             .squeeze_dim(3)
     }
@@ -587,11 +587,43 @@ pub fn load_variables(vs: &mut nn::VarStore, stored: &[(String, Tensor)]) -> Res
     Ok(())
 }
 
+/// Inverses of 3×3 matrices `[..., 3, 3]` by the adjugate: elementwise over the batch, where a
+/// batched LU (`Tensor::inverse`) loops over thousands of tiny factorisations (3 × 2808 per
+/// roll-out step: 1.8 → 0.9 ms at 1 thread). The blended transforms are well conditioned (a
+/// convex blend of rotations near each other), so the closed form loses nothing.
+pub fn inverse3(m: &Tensor) -> Tensor {
+    let e = |r: i64, c: i64| m.select(-2, r).select(-1, c);
+    let cof = |r0: i64, r1: i64, c0: i64, c1: i64| e(r0, c0) * e(r1, c1) - e(r0, c1) * e(r1, c0);
+    // Rows of the adjugate (the transposed cofactor matrix).
+    let rows = [
+        [cof(1, 2, 1, 2), -cof(0, 2, 1, 2), cof(0, 1, 1, 2)],
+        [-cof(1, 2, 0, 2), cof(0, 2, 0, 2), -cof(0, 1, 0, 2)],
+        [cof(1, 2, 0, 1), -cof(0, 2, 0, 1), cof(0, 1, 0, 1)],
+    ];
+    let det = e(0, 0) * &rows[0][0] + e(0, 1) * &rows[1][0] + e(0, 2) * &rows[2][0];
+    let adjugate = Tensor::stack(&rows.map(|r| Tensor::stack(&r, -1)), -2);
+    adjugate / det.unsqueeze(-1).unsqueeze(-1)
+}
+
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
     use crate::geometry::test_meshes::grid;
     use crate::geometry::FaceVaryingUv;
+
+    #[test]
+    fn the_adjugate_inverse_equals_lu() {
+        tch::manual_seed(3);
+        // Near rotations, as blended seed transforms are.
+        let m = Tensor::randn([2, 50, 3, 3], (Kind::Float, tch::Device::Cpu)) * 0.3
+            + Tensor::eye(3, (Kind::Float, tch::Device::Cpu));
+        let ours = inverse3(&m);
+        let lu = m.inverse();
+        let off = (&ours - &lu).abs().max().double_value(&[]);
+        assert!(off < 1e-5, "adjugate vs LU: {off}");
+        let identity = m.matmul(&ours) - Tensor::eye(3, (Kind::Float, tch::Device::Cpu));
+        assert!(identity.abs().max().double_value(&[]) < 1e-5);
+    }
 
     /// A 3-seed space on an 8² map over a small grid garment.
     pub(crate) fn small_space() -> (Space, TriMesh) {
