@@ -52,6 +52,22 @@ def read_bvh(path):
     return lines[: motion + 1], time, frames
 
 
+def write_atomically(path, lines):
+    """The lines as a text file under `path`: a temporary sibling, then a rename."""
+    directory = os.path.dirname(os.path.abspath(path))
+    fd, tmp = tempfile.mkstemp(dir=directory, prefix=".bvh.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write("\n".join(lines) + "\n")
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp's file is private; the clip is an ordinary file
+        os.replace(tmp, path)
+    except OSError as e:
+        os.unlink(tmp)
+        fail(f"{path}: cannot write ({e.strerror})")
+
+
 def beyond_frames(report_path, clip):
     """The frames beyond the trained range in a bake or eval JSON report (the clip's, for bake)."""
     try:
@@ -98,18 +114,7 @@ def main():
     picked = sorted(set(picked))
 
     out = header + [f"Frames: {len(picked)}", time] + [frames[f] for f in picked]
-    directory = os.path.dirname(os.path.abspath(args.output))
-    fd, tmp = tempfile.mkstemp(dir=directory, prefix=".cut_bvh.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write("\n".join(out) + "\n")
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp's file is private; the clip is an ordinary file
-        os.replace(tmp, args.output)
-    except OSError as e:
-        os.unlink(tmp)
-        fail(f"{args.output}: cannot write ({e.strerror})")
+    write_atomically(args.output, out)
     print(f"wrote {args.output}: {len(picked)} of {len(frames)} frames of {args.input} ({picked[:8]}{' …' if len(picked) > 8 else ''})")
 
 

@@ -471,8 +471,8 @@ fn rollout_refuses_a_space_only_model_and_a_cache_of_another_mesh() {
     let sim = short_sim(&dir);
     let space = dir.join("space.safetensors");
     train(&sim, &space, "0", &[]);
-    let fails_to = |model: &Path, init: &str, out: &Path| {
-        let o = garmentbake_in_root(&[
+    let fails_with = |model: &Path, init: &str, out: &Path, extra: &[&str]| {
+        let mut args = vec![
             "rollout",
             "--model",
             model.to_str().unwrap(),
@@ -482,9 +482,11 @@ fn rollout_refuses_a_space_only_model_and_a_cache_of_another_mesh() {
             init,
             "--out",
             out.to_str().unwrap(),
-        ]);
-        one_error_line(&o, out)
+        ];
+        args.extend_from_slice(extra);
+        one_error_line(&garmentbake_in_root(&args), out)
     };
+    let fails_to = |model: &Path, init: &str, out: &Path| fails_with(model, init, out, &[]);
     let fails = |model: &Path, init: &str| fails_to(model, init, &dir.join("never.pc2"));
     let err = fails(&space, "rest");
     assert!(err.contains("only its generative space"), "{err}");
@@ -510,17 +512,7 @@ fn rollout_refuses_a_space_only_model_and_a_cache_of_another_mesh() {
     assert!(err.contains(".pc2") && err.contains(".glb"), "{err}");
     // The body needs a file that holds two meshes.
     let never = dir.join("never_body.pc2");
-    let o = garmentbake_in_root(&[
-        "rollout",
-        "--model",
-        model.to_str().unwrap(),
-        "--motion",
-        "samples/motions/131_01.bvh",
-        "--with-body",
-        "--out",
-        never.to_str().unwrap(),
-    ]);
-    let err = one_error_line(&o, &never);
+    let err = fails_with(&model, "rest", &never, &["--with-body"]);
     assert!(
         err.contains("--with-body") && err.contains(".usdc"),
         "{err}"

@@ -109,3 +109,76 @@ fn both_cmu_namings_are_recognised_without_a_map() {
     // CMU units are about 0.0548 m judged by leg length; our hip-height scale lands near it.
     assert!((0.045..0.065).contains(&max.scale), "{}", max.scale);
 }
+
+/// `scripts/augment_bvh.py --mirror` (new training motion for the dynamic model): the mirrored
+/// clip, retargeted onto the body, is the original's mirror image (x → −x): every hand, forearm,
+/// knee and foot is where the other side's was. `--speed 1.25` plays the same poses sooner.
+#[test]
+fn a_mirrored_clip_is_the_mirror_image_and_a_faster_one_the_same_poses_sooner() {
+    let dir = out_dir("augment_bvh");
+    let augment = |out: &str, args: &[&str]| {
+        let path = dir.join(out);
+        run_ok(
+            std::process::Command::new("python3")
+                .arg(root().join("scripts/augment_bvh.py"))
+                .arg(sample("motions/131_01.bvh"))
+                .arg(&path)
+                .args(args),
+        );
+        path
+    };
+    let (mirrored, faster) = (
+        augment("mirrored.bvh", &["--mirror"]),
+        augment("faster.bvh", &["--speed", "1.25"]),
+    );
+    let body = read_body(&sample("body.glb")).unwrap();
+    let sk = &body.skeleton;
+    let load = |p: &std::path::Path| load_clip(p, &[], sk, Some(30.0)).unwrap().animation;
+    let (a, m, s) = (
+        load(&sample("motions/131_01.bvh")),
+        load(&mirrored),
+        load(&faster),
+    );
+    let j = |n: &str| sk.joint_index(n).unwrap();
+    let pairs = [
+        ("LeftHand", "RightHand"),
+        ("LeftForeArm", "RightForeArm"),
+        ("LeftLeg", "RightLeg"),
+        ("LeftFoot", "RightFoot"),
+    ];
+    let (mut worst, mut moved) = (0.0f32, 0.0f32);
+    for f in (0..a.frame_count()).step_by(5) {
+        let (p, q) = (a.joint_positions(sk, f), m.joint_positions(sk, f));
+        for (l, r) in pairs.iter().flat_map(|&(l, r)| [(l, r), (r, l)]) {
+            let (x, y) = (p[j(l)], q[j(r)]);
+            worst =
+                worst.max(((x.x + y.x).powi(2) + (x.y - y.y).powi(2) + (x.z - y.z).powi(2)).sqrt());
+            moved = moved.max((x - y).norm());
+        }
+    }
+    eprintln!(
+        "mirrored: worst {:.1} mm from the mirror image ({:.0} mm from the original)",
+        worst * 1e3,
+        moved * 1e3
+    );
+    assert!(worst < 0.02, "{:.1} mm", worst * 1e3);
+    assert!(
+        moved > 0.2,
+        "the mirrored clip must differ from the original"
+    );
+    // 1.25× as fast: frame 4k of the faster clip is frame 5k of the original (30 fps); the hand
+    // is compared relative to the hips, since grounding smooths the root over 0.1 s windows,
+    // which cover other instants of a faster take.
+    let expected = a.frame_count() as f32 / 1.25;
+    assert!(
+        (s.frame_count() as f32 - expected).abs() <= 1.0,
+        "{} frames",
+        s.frame_count()
+    );
+    for k in (0..s.frame_count() / 4).step_by(3) {
+        let (p, q) = (a.joint_positions(sk, 5 * k), s.joint_positions(sk, 4 * k));
+        let hand = |x: &[nalgebra::Vector3<f32>]| x[j("LeftHand")] - x[j("Hips")];
+        let off = (hand(&p) - hand(&q)).norm();
+        assert!(off < 1e-3, "frame {k}: {:.2} mm", off * 1e3);
+    }
+}
