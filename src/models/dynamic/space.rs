@@ -194,6 +194,8 @@ pub struct Space {
 const RADIUS0: f64 = 0.05;
 /// `R`'s output scale: displacements start at millimetres.
 const DISPLACEMENT_SCALE: f64 = 0.05;
+/// A principal component whose spread is under this fraction of the largest is rank noise.
+const RANK_TOLERANCE: f64 = 1e-5;
 
 fn leaky() -> impl Module {
     nn::func(|x| x.leaky_relu())
@@ -430,12 +432,19 @@ impl Space {
             let vh = v.tr();
             let l = self.linear_encode.size()[0].min(vh.size()[0]);
             let frames = d.size()[0].max(1) as f64;
-            let sigma = (singular.narrow(0, 0, l) / frames.sqrt())
-                .clamp_min(1e-6)
-                .unsqueeze(1);
-            let basis = vh.narrow(0, 0, l);
+            let sigma = (singular.narrow(0, 0, l) / frames.sqrt()).unsqueeze(1);
+            // Fewer distinct frames than latents: the components past the frames' rank are
+            // arbitrary directions of rounding noise (which ones depends on the CPU's kernels),
+            // and dividing by their ~0 spread would blow that noise up into latents. They stay
+            // zero: those latents are unused until the networks learn them.
+            let used = sigma
+                .gt_tensor(&(sigma.max() * RANK_TOLERANCE))
+                .to_kind(Kind::Float);
+            let basis = vh.narrow(0, 0, l) * &used;
             self.linear_mean.copy_(&mean);
-            self.linear_encode.narrow(0, 0, l).copy_(&(&basis / &sigma));
+            self.linear_encode
+                .narrow(0, 0, l)
+                .copy_(&(&basis / sigma.clamp_min(1e-12)));
             self.linear_decode.narrow(0, 0, l).copy_(&(&basis * &sigma));
         });
     }
