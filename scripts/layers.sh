@@ -17,7 +17,7 @@ LAYERS = [
     "motion garment",
     "metrics",
     "models",
-    "train eval simulate rollout",
+    "train eval simulate rollout interpolate",
     "bake",
     "validate",
     "batch",

@@ -27,6 +27,7 @@ pub mod eval;
 pub mod fabric;
 pub mod garment;
 pub mod geometry;
+pub mod interpolate;
 pub mod io;
 pub mod metrics;
 pub mod models;

@@ -230,6 +230,14 @@ pub fn percentile(sorted: &[f32], q: f64) -> f64 {
     }
 }
 
+/// Per-vertex distance (mm) between two frames of one garment.
+pub fn vertex_distances_mm(a: &[[f32; 3]], b: &[[f32; 3]]) -> Vec<f64> {
+    a.iter()
+        .zip(b)
+        .map(|(p, q)| 1e3 * f64::from(length(&[*p, *q], [0, 1])))
+        .collect()
+}
+
 fn length(p: &[[f32; 3]], [a, b]: [u32; 2]) -> f32 {
     let (a, b) = (p[a as usize], p[b as usize]);
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()

@@ -6,6 +6,7 @@ pub mod batch;
 pub mod bench;
 pub mod eval;
 pub mod inspect;
+pub mod interpolate;
 pub mod pose;
 pub mod preview;
 pub mod rollout;
@@ -74,6 +75,7 @@ enum Command {
     Simulate(simulate::Args),
     TrainDynamic(train_dynamic::Args),
     Rollout(rollout::Args),
+    Interpolate(interpolate::Args),
     Bench(bench::Args),
     Batch(batch::Args),
     Validate(validate::Args),
@@ -93,6 +95,7 @@ pub fn main() -> i32 {
         Command::Simulate(a) => run(&a, a.output.json),
         Command::TrainDynamic(a) => run(&a, a.output.json),
         Command::Rollout(a) => run(&a, a.output.json),
+        Command::Interpolate(a) => run(&a, a.output.json),
         Command::Bench(a) => run(&a, a.json()),
         Command::Batch(a) => run(&a, a.json()),
         Command::Validate(a) => run(&a, a.output.json),

@@ -45,6 +45,10 @@ pub struct Args {
     /// `simulate` or `eval`) that poses it.
     #[arg(long = "cache")]
     pub caches: Vec<PathBuf>,
+    /// The clip frame of each --cache's first sample (a cache of part of the clip, e.g. from
+    /// `interpolate`); --error-vs always starts at frame 0.
+    #[arg(long, default_value_t = 0)]
+    pub cache_start: usize,
     /// With several --cache: draw each cached garment in its own panel (labelled by its file
     /// name), side by side per frame, instead of all on one body: model / simulation / LBS.
     #[arg(long)]
@@ -168,7 +172,13 @@ fn render(args: &Args) -> Result<Report> {
         .iter()
         .map(|p| Garment::read(p))
         .collect::<Result<Vec<_>>>()?;
-    let poses: Vec<(String, Vec<JointTransform>, usize)> = if args.motions.is_empty() {
+    let caches = args
+        .caches
+        .iter()
+        .zip(&garments)
+        .map(|(p, g)| crate::io::point_cache::read_pc2(p, g.mesh.vertex_count()))
+        .collect::<Result<Vec<_>>>()?;
+    let poses: Vec<Shown> = if args.motions.is_empty() {
         if !args.caches.is_empty() {
             bail!("--cache plays a garment over a clip: add --motion");
         }
@@ -178,25 +188,33 @@ fn render(args: &Args) -> Result<Report> {
             bail!("with --motion each --garment needs its --cache (a point cache from simulate or eval), or a trained model: --model");
         }
         let (fps, sequence) = played(args, &body.skeleton)?;
-        let frames = pick_frames(sequence.len(), args.frames, &args.frame_list)?;
+        // Evenly spaced frames cover what every cache holds.
+        let start = if caches.is_empty() {
+            0
+        } else {
+            args.cache_start
+        };
+        let end = caches
+            .iter()
+            .map(|c| start + c.len())
+            .fold(sequence.len(), usize::min);
+        let frames = pick_frames(start..end.max(start + 1), args.frames, &args.frame_list)?;
         frames
             .iter()
             .map(|&f| (frame_label(fps, f), sequence[f].clone(), f))
             .collect()
     };
-    let caches = args
-        .caches
-        .iter()
-        .zip(&garments)
-        .map(|(p, g)| cache_frames(p, g, poses.iter().map(|p| p.2).max().unwrap_or(0)))
-        .collect::<Result<Vec<_>>>()?;
+    for (cache, path) in caches.iter().zip(&args.caches) {
+        check_covers(cache, path, &poses, args.cache_start)?;
+    }
     let reference = match &args.error_vs {
         Some(path) => {
             let Some(first) = garments.first() else {
                 bail!("--error-vs colours cached garments: add --garment and --cache");
             };
-            let last = poses.iter().map(|p| p.2).max().unwrap_or(0);
-            Some(cache_frames(path, first, last)?)
+            let frames = crate::io::point_cache::read_pc2(path, first.mesh.vertex_count())?;
+            check_covers(&frames, path, &poses, 0)?;
+            Some(frames)
         }
         None => None,
     };
@@ -216,13 +234,16 @@ fn render(args: &Args) -> Result<Report> {
             reference
                 .as_ref()
                 .filter(|r| r[*frame].len() == points.len())
-                .map(|r| vertex_errors_mm(points, &r[*frame]))
+                .map(|r| crate::metrics::vertex_distances_mm(points, &r[*frame]))
         };
         let mut drawn: Vec<Drawn> = garments
             .iter()
             .enumerate()
             .map(|(i, g)| match caches.get(i) {
-                Some(c) => (c[*frame].clone(), i, errors(&c[*frame])),
+                Some(c) => {
+                    let x = &c[*frame - args.cache_start];
+                    (x.clone(), i, errors(x))
+                }
                 None => (g.mesh.positions.clone(), i, None),
             })
             .collect();
@@ -365,49 +386,59 @@ fn played(args: &Args, skeleton: &Skeleton) -> Result<(f32, Vec<Vec<JointTransfo
 }
 
 /// The frames to show: an explicit list, or `count` evenly spaced ones (first and last included).
-pub(crate) fn pick_frames(total: usize, count: usize, list: &[usize]) -> Result<Vec<usize>> {
-    if let Some(bad) = list.iter().find(|&&f| f >= total) {
-        bail!("frame {bad} is past the end of the clip ({total} frames)");
+pub(crate) fn pick_frames(
+    span: std::ops::Range<usize>,
+    count: usize,
+    list: &[usize],
+) -> Result<Vec<usize>> {
+    if let Some(bad) = list.iter().find(|&&f| f >= span.end) {
+        bail!(
+            "frame {bad} is past the last frame there is to show ({}: the clip's end, or a --cache's)",
+            span.end - 1
+        );
     }
     if !list.is_empty() {
         return Ok(list.to_vec());
     }
+    let total = span.len().max(1);
     let count = count.clamp(1, total);
     Ok((0..count)
         .map(|i| {
-            if count == 1 {
-                0
-            } else {
-                i * (total - 1) / (count - 1)
-            }
+            span.start
+                + if count == 1 {
+                    0
+                } else {
+                    i * (total - 1) / (count - 1)
+                }
         })
         .collect())
 }
 
-/// Per-vertex distance (mm) between two frames of one garment.
-fn vertex_errors_mm(a: &[[f32; 3]], b: &[[f32; 3]]) -> Vec<f64> {
-    a.iter()
-        .zip(b)
-        .map(|(p, q)| {
-            1e3 * ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt()
-                as f64
-        })
-        .collect()
-}
+/// A posed frame to draw: label, pose, clip frame.
+type Shown = (String, Vec<JointTransform>, usize);
 
-/// A garment's cache, long enough to show frame `last`.
-fn cache_frames(
+/// Checks that a cache whose first sample is clip frame `start` holds every drawn frame (index
+/// it by frame − `start`).
+fn check_covers(
+    frames: &[Vec<[f32; 3]>],
     path: &std::path::Path,
-    garment: &Garment,
-    last: usize,
-) -> Result<Vec<Vec<[f32; 3]>>> {
-    let frames = crate::io::point_cache::read_pc2(path, garment.mesh.vertex_count())?;
-    if frames.len() <= last {
+    poses: &[Shown],
+    start: usize,
+) -> Result<()> {
+    let first = poses.iter().map(|p| p.2).min().unwrap_or(0);
+    let last = poses.iter().map(|p| p.2).max().unwrap_or(0);
+    if first < start {
         bail!(
-            "{}: {} frames, frame {last} asked for (was it written at another --fps?)",
+            "{}: starts at clip frame {start} (--cache-start), frame {first} asked for",
+            path.display()
+        );
+    }
+    if frames.len() + start <= last {
+        bail!(
+            "{}: {} frames from frame {start}, frame {last} asked for (was it written at another --fps?)",
             path.display(),
             frames.len()
         );
     }
-    Ok(frames)
+    Ok(())
 }

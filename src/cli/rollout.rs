@@ -531,21 +531,14 @@ fn versus(frames: &[Vec<[f32; 3]>], reference: &[Vec<[f32; 3]>]) -> Versus {
         .iter()
         .zip(reference)
         .map(|(a, b)| {
-            let d: Vec<f64> = a
-                .iter()
-                .zip(b)
-                .map(|(p, q)| {
-                    ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt()
-                        as f64
-                })
-                .collect();
+            let d = crate::metrics::vertex_distances_mm(a, b);
             (
                 d.iter().sum::<f64>() / d.len().max(1) as f64,
                 d.iter().copied().fold(0.0, f64::max),
             )
         })
         .collect();
-    let mean = |s: &[(f64, f64)]| 1e3 * s.iter().map(|x| x.0).sum::<f64>() / s.len().max(1) as f64;
+    let mean = |s: &[(f64, f64)]| s.iter().map(|x| x.0).sum::<f64>() / s.len().max(1) as f64;
     let predicted = &per_frame[1.min(per_frame.len())..];
     let (worst_frame, max) =
         per_frame
@@ -556,7 +549,7 @@ fn versus(frames: &[Vec<[f32; 3]>], reference: &[Vec<[f32; 3]>]) -> Versus {
         one_step_mm: mean(&predicted[..1.min(predicted.len())]),
         first_50_mm: mean(&predicted[..50.min(predicted.len())]),
         clip_mm: mean(predicted),
-        max_mm: 1e3 * max,
+        max_mm: max,
         worst_frame,
     }
 }

@@ -582,3 +582,93 @@ fn previews_side_by_side(dir: &Path, sim: &Path, roll: &Path) {
         String::from_utf8_lossy(&two.stderr)
     );
 }
+
+/// `interpolate`: the walk between two frames' latents starts and ends on the space's
+/// reconstructions of those frames (exact for the untrained 64-d space of six frames), has one
+/// sample per clip frame between them, and `preview --cache-start` draws it on the right poses.
+#[test]
+fn a_latent_walk_ends_on_its_frames_and_previews_from_its_start() {
+    if blender_skipped() {
+        return;
+    }
+    let dir = out_dir("dyn_interpolate");
+    let sim = short_sim(&dir);
+    let space = dir.join("space.safetensors");
+    train(&sim, &space, "0", &[]);
+    let walk = dir.join("walk.pc2");
+    let args = |between: &'static str, out: &Path| {
+        vec![
+            "interpolate".to_string(),
+            "--model".into(),
+            space.display().to_string(),
+            "--motion".into(),
+            "samples/motions/131_01.bvh".into(),
+            "--sim".into(),
+            sim.display().to_string(),
+            "--between".into(),
+            between.into(),
+            "--threads".into(),
+            "1".into(),
+            "--out".into(),
+            out.display().to_string(),
+        ]
+    };
+    let mut json = args("1,4", &walk);
+    json.push("--json".into());
+    let report = garmentbake_json(&json.iter().map(String::as_str).collect::<Vec<_>>());
+    let frames = report["frames"].as_array().unwrap();
+    let got: Vec<(u64, f64)> = frames
+        .iter()
+        .map(|f| (f["frame"].as_u64().unwrap(), f["t"].as_f64().unwrap()))
+        .collect();
+    let thirds = [(1, 0.0), (2, 1.0 / 3.0), (3, 2.0 / 3.0), (4, 1.0)];
+    assert!(
+        got.iter()
+            .zip(thirds)
+            .all(|(g, w)| g.0 == w.0 && (g.1 - w.1).abs() < 1e-9)
+            && got.len() == 4,
+        "{got:?}"
+    );
+    for end in [&frames[0], &frames[3]] {
+        let mm = end["vs_sim_mean_mm"].as_f64().unwrap();
+        assert!(mm < 0.05, "an end of the walk is {mm:.3} mm off its frame");
+    }
+    assert!(report["latent_distance"].as_f64().unwrap() > 0.0);
+    let png = dir.join("walk.png");
+    let preview = |extra: &[&str]| {
+        let mut a = vec![
+            "preview",
+            "--body",
+            "samples/body.glb",
+            "--motion",
+            "samples/motions/131_01.bvh",
+            "--fps",
+            "30",
+            "--garment",
+            "samples/garments/skirt.obj",
+            "--cache",
+            walk.to_str().unwrap(),
+            "--cache-start",
+            "1",
+            "--views",
+            "front",
+            "--out",
+            png.to_str().unwrap(),
+        ];
+        a.extend_from_slice(extra);
+        garmentbake_in_root(&a)
+    };
+    let o = preview(&["--frames", "6"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("4 panels"));
+    std::fs::remove_file(&png).unwrap();
+    let err = one_error_line(&preview(&["--frame-list", "0,2"]), &png);
+    assert!(err.contains("--cache-start"), "{err}");
+    let never = dir.join("never.pc2");
+    let bad = args("4,1", &never);
+    let err = one_error_line(
+        &garmentbake_in_root(&bad.iter().map(String::as_str).collect::<Vec<_>>()),
+        &never,
+    );
+    assert!(err.contains("a < b"), "{err}");
+}
