@@ -11,8 +11,9 @@ use crate::models::dynamic::{MotionShape, Seeds};
 use crate::models::file::{DynamicEpoch, ModelFile, MotionEpoch, RolloutRound};
 use crate::motion::{load_clip, read_maps};
 use crate::rig::Skeleton;
+use crate::rollout::{for_model, Init, Settings as RolloutSettings};
 use crate::train::dynamic::{FrameData, Reconstruction, Sequence, Settings, SpaceTrainer};
-use crate::train::motion::{one_step, roll_clips, MotionTrainer, Settings as MotionSettings};
+use crate::train::motion::{one_step, MotionTrainer, Settings as MotionSettings};
 use crate::train::{fit, FitOptions, Fitted, Training};
 use anyhow::{bail, Result};
 use serde::Serialize;
@@ -87,6 +88,11 @@ pub struct Args {
     /// roll-out of all training frames. 0: the teacher-forced fit alone (closest one step ahead).
     #[arg(long, default_value_t = 3)]
     pub rollout_rounds: usize,
+    /// Stage dynamic: the rounds' roll-outs run the collision fix, as `rollout` plays the
+    /// model, so the integrator is refitted on the histories it meets at play time (the fix
+    /// makes a round ~3× slower).
+    #[arg(long)]
+    pub rollout_fix: bool,
     /// Stage dynamic: channels of the motion features `E_t`.
     #[arg(long, default_value_t = 16)]
     pub motion_features: usize,
@@ -367,25 +373,30 @@ impl Args {
         let rounds = if self.resume {
             trainer.info().rollout_rounds.clone()
         } else {
-            self.fit_on_rollouts(&mut trainer)?
+            self.fit_on_rollouts(&mut trainer, &train, device)?
         };
         let done = trainer.epochs_done();
         let fitted = fit(&mut trainer, &self.fit_options())?;
         let dynamic = trainer.dynamic();
         let train_err = one_step(dynamic, &trainer.data, fps)?;
-        let range = trainer.info().latent_bounds(device);
         let mut eval_rollout = None;
         let eval = eval
             .map(|s| {
                 let data = self.frame_data(&trainer.file, &s, device)?;
                 let bar =
                     crate::progress::bar(data.len() as u64, "held-out roll-out", self.output.json);
-                let rolled = roll_clips(dynamic, &data, fps, Some(&range), &mut |f| {
-                    bar.set_position(f as u64)
-                })?;
+                let rolled = roll_clips(
+                    &trainer.file,
+                    std::slice::from_ref(&s),
+                    false,
+                    device,
+                    &mut |f| bar.set_position(f as u64),
+                )?;
                 bar.finish_and_clear();
-                let truth = data.garment.index_select(0, &rolled.frames);
-                eval_rollout = Some((s.name.clone(), Reconstruction::of(&rolled.garment, &truth)));
+                // Frame 0 is the simulation's: the predicted frames follow.
+                let n = data.len() as i64 - 1;
+                let (rolled, truth) = (rolled.narrow(0, 1, n), data.garment.narrow(0, 1, n));
+                eval_rollout = Some((s.name.clone(), Reconstruction::of(&rolled, &truth)));
                 Ok::<_, anyhow::Error>((s.name.clone(), one_step(dynamic, &data, fps)?))
             })
             .transpose()?;
@@ -405,16 +416,23 @@ impl Args {
         })
     }
 
-    /// `--rollout-rounds`, with a progress bar per round.
-    fn fit_on_rollouts(&self, trainer: &mut MotionTrainer) -> Result<Vec<RolloutRound>> {
+    /// `--rollout-rounds` on the training clips `train`, with a progress bar.
+    fn fit_on_rollouts(
+        &self,
+        trainer: &mut MotionTrainer,
+        train: &[Sequence],
+        device: tch::Device,
+    ) -> Result<Vec<RolloutRound>> {
         let frames = trainer.data.len() as u64;
         let bar = crate::progress::bar(
             frames * self.rollout_rounds as u64,
             "roll-out-aware fit",
             self.output.json,
         );
-        let rounds = trainer.fit_on_rollouts(self.rollout_rounds, &mut |round, f| {
-            bar.set_position(round as u64 * frames + f as u64)
+        let rounds = trainer.fit_on_rollouts(self.rollout_rounds, &mut |file, round| {
+            roll_clips(file, train, self.rollout_fix, device, &mut |f| {
+                bar.set_position(round as u64 * frames + f as u64)
+            })
         })?;
         bar.finish_and_clear();
         Ok(rounds)
@@ -456,6 +474,40 @@ impl Args {
             device,
         ))
     }
+}
+
+/// Every frame of `clips` as the model in `file` plays them (`rollout::roll_out`, latents
+/// held in the training range) from each clip's first simulated frame, `[F, V, 3]` in the
+/// clips' order; `done` gets the frames so far.
+fn roll_clips(
+    file: &ModelFile,
+    clips: &[Sequence],
+    collision_fix: bool,
+    device: tch::Device,
+    done: &mut dyn FnMut(usize),
+) -> Result<tch::Tensor> {
+    let settings = RolloutSettings {
+        collision_fix,
+        measure_collisions: false,
+        ..RolloutSettings::default()
+    };
+    let mut frames: Vec<Vec<[f32; 3]>> = Vec::new();
+    for s in clips {
+        let Some(first) = s.garment.first() else {
+            continue;
+        };
+        let poses: Vec<_> = (0..s.garment.len()).map(|f| s.clip.local_pose(f)).collect();
+        let before = frames.len();
+        let init = Init::Garment(first.clone());
+        let rolled = for_model(file, &poses, &init, settings.clone(), &mut |f| {
+            done(before + f)
+        })?;
+        frames.extend(rolled.frames);
+    }
+    let flat: Vec<f32> = frames.iter().flatten().flatten().copied().collect();
+    Ok(tch::Tensor::from_slice(&flat)
+        .reshape([frames.len() as i64, -1, 3])
+        .to_device(device))
 }
 
 fn radii_mm(info: &crate::models::file::DynamicInfo) -> Vec<(String, f64)> {

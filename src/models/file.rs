@@ -108,14 +108,6 @@ pub struct MotionInfo {
     pub rollout_rounds: Vec<RolloutRound>,
 }
 
-impl MotionInfo {
-    /// The latent range as `[1, L]` bounds.
-    pub fn latent_bounds(&self, device: tch::Device) -> (tch::Tensor, tch::Tensor) {
-        let t = |v: &[f32]| tch::Tensor::from_slice(v).unsqueeze(0).to_device(device);
-        (t(&self.latent_min), t(&self.latent_max))
-    }
-}
-
 /// One round of the roll-out-aware fit: the regression's rows after it and the mean vertex
 /// error of the round's roll-outs of the training clips (before its refit).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -54,6 +54,7 @@ pub fn history_indices(data: &FrameData, device: Device) -> [Tensor; 3] {
 fn static_inputs(
     space: &crate::models::dynamic::Space,
     data: &FrameData,
+    garments: &Tensor,
     history: &[Tensor; 3],
     fps: f64,
 ) -> StaticInputs {
@@ -64,7 +65,7 @@ fn static_inputs(
         let idx = Tensor::arange_start(start as i64, (start + n) as i64, (Kind::Int64, device));
         parts.push(StaticInputs::new(
             space,
-            &teacher_history(data, history, &idx, fps),
+            &history_of(data, garments, history, &idx, fps),
         ));
     }
     let cat =
@@ -78,9 +79,21 @@ fn static_inputs(
 
 /// The simulated history of frames `idx` (teacher forcing) and the body around them.
 fn teacher_history(data: &FrameData, history: &[Tensor; 3], idx: &Tensor, fps: f64) -> History {
+    history_of(data, &data.garment, history, idx, fps)
+}
+
+/// The history of frames `idx` read from `garments` `[F, V, 3]` (the simulation's frames, or a
+/// roll-out's of the same clips) and the body around them.
+fn history_of(
+    data: &FrameData,
+    garments: &Tensor,
+    history: &[Tensor; 3],
+    idx: &Tensor,
+    fps: f64,
+) -> History {
     let back: Vec<Tensor> = history.iter().map(|h| h.index_select(0, idx)).collect();
     History {
-        garment: std::array::from_fn(|k| data.garment.index_select(0, &back[k])),
+        garment: std::array::from_fn(|k| garments.index_select(0, &back[k])),
         before: data.body.select(&back[0]),
         now: data.body.select(idx),
         fps,
@@ -136,16 +149,6 @@ impl Rows {
     }
 }
 
-/// Roll-outs of every clip of a [`FrameData`] from its first simulated frame (no collision fix):
-/// the predicted garments of the predicted frames, their indices, and the linear path's inputs
-/// at each of them.
-pub struct ClipRollouts {
-    pub garment: Tensor,
-    pub frames: Tensor,
-    inertia: Tensor,
-    previous: Tensor,
-}
-
 impl MotionTrainer {
     /// Grows `file` (a dynamic model with its space trained) a motion encoder.
     pub fn new(
@@ -173,7 +176,7 @@ impl MotionTrainer {
             let (g, b, m) = data.batch(&data.range(start, n));
             space.encode(&g, &b, &m)
         });
-        let statics = static_inputs(space, &data, &history, fps);
+        let statics = static_inputs(space, &data, &data.garment, &history, fps);
         let frames = Tensor::from_slice(&predicted_frames(&data)).to_device(device);
         let mut encoder = encoder;
         let fitted = statics.select(&frames);
@@ -237,32 +240,39 @@ impl MotionTrainer {
     }
 
     /// Roll-out-aware fit of the linear path ("data as demonstrator", Venkatraman et al. 2015):
-    /// each round rolls the model out over every training clip from its first simulated frame,
-    /// adds every predicted frame's inputs (a history the model made itself) with the simulated
-    /// frame's latent as the target, and refits on all rows so far. The integrator thus learns
-    /// to pull its own drifted states back, which teacher forcing never shows it. Returns each
-    /// round's roll-out error on the training clips before its refit.
+    /// each round `roll`s the model out over every training clip from its first simulated
+    /// frame (the caller decides how: `rollout::roll_out`, with or without the collision fix)
+    /// and returns every frame `[F, V, 3]`, clips in the order of the training data; every
+    /// predicted frame's inputs (a history the model made itself) join the rows with the
+    /// simulated frame's latent as the target, and the linear path is refitted on all rows so
+    /// far. The integrator thus learns to pull its own drifted states back, which teacher
+    /// forcing never shows it. Returns each round's roll-out error on the training clips
+    /// before its refit.
     pub fn fit_on_rollouts(
         &mut self,
         rounds: usize,
-        progress: &mut dyn FnMut(usize, usize),
+        roll: &mut dyn FnMut(&ModelFile, usize) -> Result<Tensor>,
     ) -> Result<Vec<RolloutRound>> {
         let mut done = Vec::new();
         for round in 0..rounds {
-            let range = self.info().latent_bounds(self.settings.device);
-            let rolled = roll_clips(
-                self.dynamic(),
-                &self.data,
-                self.fps,
-                Some(&range),
-                &mut |f| progress(round, f),
-            )?;
-            let truth = self.data.garment.index_select(0, &rolled.frames);
-            let error = Reconstruction::of(&rolled.garment, &truth);
+            let rolled = roll(&self.file, round)?;
+            if rolled.size() != self.data.garment.size() {
+                bail!(
+                    "a roll-out of {:?} frames for training data of {:?}",
+                    rolled.size(),
+                    self.data.garment.size()
+                );
+            }
+            let predicted = rolled.index_select(0, &self.frames);
+            let truth = self.data.garment.index_select(0, &self.frames);
+            let error = Reconstruction::of(&predicted, &truth);
+            let space = &self.dynamic().space;
+            let inputs = static_inputs(space, &self.data, &rolled, &self.history, self.fps)
+                .select(&self.frames);
             self.rows.push(Rows {
-                target: self.latents.index_select(0, &rolled.frames),
-                inertia: rolled.inertia,
-                previous: rolled.previous,
+                target: self.latents.index_select(0, &self.frames),
+                inertia: inputs.inertia,
+                previous: inputs.previous_latent,
             });
             let all = Rows::cat(&self.rows);
             let ridge = self.settings.ridge;
@@ -398,65 +408,6 @@ pub fn vertex_distance(a: &Tensor, b: &Tensor) -> Tensor {
         .square()
         .sum_dim_intlist(2, false, Kind::Float)
         .sqrt()
-}
-
-/// Rolls `dynamic` out over every clip of `data` from the clip's first simulated frame, frame by
-/// frame (each prediction the next history), without the collision fix; latents held in
-/// `range` (the model's training range, as `rollout` holds them). `progress` gets the frames
-/// done.
-pub fn roll_clips(
-    dynamic: &Dynamic,
-    data: &FrameData,
-    fps: f64,
-    range: Option<&(Tensor, Tensor)>,
-    progress: &mut dyn FnMut(usize),
-) -> Result<ClipRollouts> {
-    let encoder = dynamic.motion()?;
-    let space = &dynamic.space;
-    let device = data.garment.device();
-    let mut ends = data.clip_starts[1..].to_vec();
-    ends.push(data.len());
-    let at = |f: usize| Tensor::from_slice(&[f as i64]).to_device(device);
-    let (mut garments, mut frames, mut inertia, mut previous) =
-        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    let mut done = 0;
-    for (&start, &end) in data.clip_starts.iter().zip(&ends) {
-        let mut history = vec![data.garment.narrow(0, start as i64, 1)];
-        for t in start + 1..end {
-            let back = |k: usize| history[history.len().saturating_sub(k)].shallow_clone();
-            let h = History {
-                garment: [back(1), back(2), back(3)],
-                before: data.body.select(&at(t - 1)),
-                now: data.body.select(&at(t)),
-                fps,
-            };
-            let x = motion_inputs(space, &h, encoder.shape.sigma, None);
-            let z = dynamic.next_latent(&x, range)?;
-            let g = tch::no_grad(|| space.skin(&space.canonical(&z), &h.now.transforms));
-            if g.isfinite().logical_not().any().int64_value(&[]) != 0 {
-                bail!("the roll-out produced a non-finite vertex at frame {t}");
-            }
-            inertia.push(x.inertia);
-            previous.push(x.previous_latent);
-            frames.push(t as i64);
-            garments.push(g.shallow_clone());
-            history.push(g);
-            if history.len() > 3 {
-                drop(history.remove(0));
-            }
-            done += 1;
-            progress(done);
-        }
-    }
-    if frames.is_empty() {
-        bail!("nothing to roll out: every clip has a single frame");
-    }
-    Ok(ClipRollouts {
-        garment: Tensor::cat(&garments, 0),
-        frames: Tensor::from_slice(&frames).to_device(device),
-        inertia: Tensor::cat(&inertia, 0),
-        previous: Tensor::cat(&previous, 0),
-    })
 }
 
 /// One-step predictions (teacher-forced histories) of every frame that has a previous frame in

@@ -288,12 +288,14 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
         "one-step error {h:.2} mm held, {f:.2} mm fitted"
     );
     // Roll-out-aware fit: refitted on its own roll-out of the clip, the model's next roll-out
-    // is closer to the simulation than the teacher-forced fit's.
+    // is closer to the simulation than the teacher-forced fit's. A strong ridge keeps the
+    // teacher-forced fit from interpolating the five frames exactly, so there is drift to
+    // learn from (1e-3 rolls out to 0.001 mm before any refit).
     let (_, refit) = motion_model(
         &dir,
         &sim,
         "refit.safetensors",
-        &["--ridge", "1e-3", "--rollout-rounds", "2"],
+        &["--ridge", "1", "--rollout-rounds", "2"],
     );
     let rounds = refit["rollout_rounds"].as_array().unwrap();
     let rows: Vec<u64> = rounds.iter().map(|r| r["rows"].as_u64().unwrap()).collect();
@@ -305,7 +307,7 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
     let before = rounds[0]["train_rollout_mean_mm"].as_f64().unwrap();
     let after = rounds[1]["train_rollout_mean_mm"].as_f64().unwrap();
     eprintln!("roll-out of the training frames: {before:.3} mm teacher-forced fit, {after:.3} mm refitted");
-    assert!(after < before, "{before:.3} mm then {after:.3} mm");
+    assert!(after < 0.8 * before, "{before:.3} mm then {after:.3} mm");
     let o = garmentbake_in_root(&["inspect", model.to_str().unwrap()]);
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(text.contains("dynamic"), "{text}");
