@@ -7,7 +7,7 @@
 
 use crate::body::{nearest_offsets, Body};
 use crate::geometry::PointIndex;
-use crate::models::dynamic::motion::{motion_inputs, History};
+use crate::models::dynamic::motion::History;
 use crate::models::dynamic::{BodyFrames, Dynamic, MeshLaplacian, Seeds};
 use crate::models::file::ModelFile;
 use crate::rig::JointTransform;
@@ -129,8 +129,9 @@ pub fn roll_out(
     settings: &Settings,
     progress: &mut dyn FnMut(usize),
 ) -> Result<Rollout> {
-    let encoder = model.motion()?;
+    model.motion()?;
     let space = &model.space;
+    let linear_only = model.linear_only();
     let device = space.consts.rest.device();
     if poses.is_empty() {
         bail!("nothing to roll out: the clip has no frames");
@@ -166,7 +167,7 @@ pub fn roll_out(
             now: at(t),
             fps,
         };
-        let x = motion_inputs(space, &h, encoder.shape.sigma, None);
+        let x = model.step_inputs(&h, linear_only)?;
         timing.inputs_ms = ms(clock);
         let clock = Instant::now();
         let z = model.next_latent(&x, range.as_ref())?;

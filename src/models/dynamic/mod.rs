@@ -32,21 +32,63 @@ impl Dynamic {
         })
     }
 
+    /// Whether every network's output layer is zero (both stages trained `--epochs 0`): a
+    /// roll-out step is then exactly the linear paths', and [`Dynamic::step_inputs`] skips
+    /// the networks' inputs.
+    pub fn linear_only(&self) -> bool {
+        self.space.networks_idle() && self.motion.as_ref().is_some_and(|m| m.residual_idle())
+    }
+
+    /// A roll-out step's inputs from its history: all of them, or with `linear_only` (see
+    /// [`Dynamic::linear_only`]) only the linear path's latents.
+    pub fn step_inputs(
+        &self,
+        h: &motion::History,
+        linear_only: bool,
+    ) -> anyhow::Result<StepInputs> {
+        let encoder = self.motion()?;
+        Ok(if linear_only {
+            let (previous, inertia) = motion::StaticInputs::linear(&self.space, h);
+            StepInputs::Linear { previous, inertia }
+        } else {
+            StepInputs::Full(motion::motion_inputs(
+                &self.space,
+                h,
+                encoder.shape.sigma,
+                None,
+            ))
+        })
+    }
+
     /// The next frame's latent from its inputs (no gradients), held per dimension inside
-    /// `range` (`[1, L]` bounds) when given: a roll-out's step, shared by `rollout` and the
-    /// roll-out-aware fit.
+    /// `range` (`[1, L]` bounds) when given: a roll-out's step.
     pub fn next_latent(
         &self,
-        x: &motion::MotionInputs,
+        x: &StepInputs,
         range: Option<&(tch::Tensor, tch::Tensor)>,
     ) -> anyhow::Result<tch::Tensor> {
         let encoder = self.motion()?;
-        let z = tch::no_grad(|| encoder.latent(x, Some(&encoder.dynamic_features(&self.space, x))));
+        let z = tch::no_grad(|| match x {
+            StepInputs::Full(x) => {
+                encoder.latent(x, Some(&encoder.dynamic_features(&self.space, x)))
+            }
+            StepInputs::Linear { previous, inertia } => encoder.linear_latent(inertia, previous),
+        });
         Ok(match range {
             Some((lo, hi)) => z.clamp_tensor(Some(lo), Some(hi)),
             None => z,
         })
     }
+}
+
+/// What a roll-out step feeds the motion encoder.
+pub enum StepInputs {
+    Full(motion::MotionInputs),
+    /// The linear path's inputs alone: `Z_{t−1}` and `[Z^ball_t, Z^stay_t]`.
+    Linear {
+        previous: tch::Tensor,
+        inertia: tch::Tensor,
+    },
 }
 
 /// The garment's uniform Laplacian `x − mean of its neighbours`, per vertex of `x [B, V, 3]`,

@@ -96,21 +96,44 @@ impl StaticInputs {
     /// and `S(M^P_{t−1})` is the first one's feature map rather than a fourth pass.
     pub fn new(space: &Space, h: &History) -> StaticInputs {
         tch::no_grad(|| {
-            let [g1, g2, _] = &h.garment;
-            let ballistic = g1 * 2.0 - g2;
-            let (before, now) = (&h.before, &h.now);
-            let g = Tensor::cat(&[g1, &ballistic, g1], 0);
-            let b = Tensor::cat(&[&before.seeds, &now.seeds, &now.seeds], 0);
-            let m = Tensor::cat(&[&before.transforms, &now.transforms, &now.transforms], 0);
+            let (g, b, m) = Self::stacked(h);
             let (features, z) = space.encode_keeping_features(&g, &b, &m);
-            let bs = g1.size()[0];
-            let z = z.split(bs, 0);
+            let bs = h.garment[0].size()[0];
+            let (previous_latent, inertia) = Self::split(&z, bs);
             StaticInputs {
                 static_features: features.narrow(0, 0, bs),
-                previous_latent: z[0].shallow_clone(),
-                inertia: Tensor::cat(&[&z[1], &z[2]], 1),
+                previous_latent,
+                inertia,
             }
         })
+    }
+
+    /// `(Z_{t−1}, [Z^ball_t, Z^stay_t])` by the space's linear path alone: all of them when the
+    /// space's networks are idle ([`Space::networks_idle`]).
+    pub fn linear(space: &Space, h: &History) -> (Tensor, Tensor) {
+        tch::no_grad(|| {
+            let (g, _, m) = Self::stacked(h);
+            Self::split(&space.linear_latent(&g, &m), h.garment[0].size()[0])
+        })
+    }
+
+    /// The three garments to encode (`g_{t−1}` against the body at `t − 1`; the ballistic
+    /// guess and `g_{t−1}` against the body at `t`) as one batch: garments, seeds, transforms.
+    fn stacked(h: &History) -> (Tensor, Tensor, Tensor) {
+        let [g1, g2, _] = &h.garment;
+        let ballistic = g1 * 2.0 - g2;
+        let (before, now) = (&h.before, &h.now);
+        (
+            Tensor::cat(&[g1, &ballistic, g1], 0),
+            Tensor::cat(&[&before.seeds, &now.seeds, &now.seeds], 0),
+            Tensor::cat(&[&before.transforms, &now.transforms, &now.transforms], 0),
+        )
+    }
+
+    /// Latents of a [`StaticInputs::stacked`] batch of `3 × bs` into `Z_{t−1}` and the inertia.
+    fn split(z: &Tensor, bs: i64) -> (Tensor, Tensor) {
+        let z = z.split(bs, 0);
+        (z[0].shallow_clone(), Tensor::cat(&[&z[1], &z[2]], 1))
     }
 
     /// Frames `idx` of precomputed inputs.
@@ -301,8 +324,23 @@ impl MotionEncoder {
         };
         let input = Tensor::cat(&[x.static_features.shallow_clone(), e.shallow_clone()], 1);
         let h = self.encoder.forward(&input).flatten(1, -1);
-        Self::linear_input(&inertia, &x.previous_latent).matmul(&self.linear.tr())
-            + self.encoder_fc.forward(&h)
+        self.linear_latent(&inertia, &x.previous_latent) + self.encoder_fc.forward(&h)
+    }
+
+    /// `W [Z^ball_t, Z^stay_t, Z_{t−1}, 1]`: the whole latent when [`MotionEncoder::residual_idle`].
+    pub fn linear_latent(&self, inertia: &Tensor, previous: &Tensor) -> Tensor {
+        Self::linear_input(inertia, previous).matmul(&self.linear.tr())
+    }
+
+    /// Whether the residual `ΔE` adds nothing (its output layer is zero: `--epochs 0`).
+    pub fn residual_idle(&self) -> bool {
+        super::space::all_zero(
+            &self.vs,
+            &[
+                "motion.enc_fc.weight".to_string(),
+                "motion.enc_fc.bias".to_string(),
+            ],
+        )
     }
 
     /// `[Z^ball, Z^stay, Z_{t−1}, 1]` `[B, 3L + 1]`.

@@ -187,6 +187,9 @@ pub struct Space {
     pub consts: Consts,
     /// The kernel weights once the space is frozen ([`Space::freeze`]).
     frozen_weights: Option<Tensor>,
+    /// Frozen with `E_sta`'s and `R`'s output layers all zero (a space trained `--epochs 0`):
+    /// the networks then add exactly nothing to `Z` and `d`, and are skipped.
+    networks_idle: bool,
 }
 
 /// Initial kernel radius (metres): under the seed spacing (~6 cm for the cpu preset on the skirt), so
@@ -326,6 +329,7 @@ impl Space {
             linear_decode,
             consts,
             frozen_weights: None,
+            networks_idle: false,
         })
     }
 
@@ -399,11 +403,19 @@ impl Space {
     /// [`Space::encode`] that also returns the `S(M^P)` it went through (the dynamic stage's
     /// input), so that callers needing both pay for `S` once.
     pub fn encode_keeping_features(&self, g: &Tensor, b: &Tensor, m: &Tensor) -> (Tensor, Tensor) {
-        let linear =
-            (self.rest_displacements(g, m) - &self.linear_mean).matmul(&self.linear_encode.tr());
         let features = self.static_features(g, b);
-        let z = self.encode_features(&features) + linear;
+        let z = self.encode_features(&features) + self.linear_latent(g, m);
         (features, z)
+    }
+
+    /// The linear path's part of `Z` (all of it when [`Space::networks_idle`]).
+    pub fn linear_latent(&self, g: &Tensor, m: &Tensor) -> Tensor {
+        (self.rest_displacements(g, m) - &self.linear_mean).matmul(&self.linear_encode.tr())
+    }
+
+    /// Whether the frozen space's networks add nothing (their output layers are zero).
+    pub fn networks_idle(&self) -> bool {
+        self.networks_idle
     }
 
     /// Garments `g [B, V, 3]` unskinned by seed transforms `m` (each vertex's blended transform
@@ -463,6 +475,10 @@ impl Space {
     /// Canonical garments `ĝ [B, V, 3]` of latents `z [B, L]`.
     pub fn canonical(&self, z: &Tensor) -> Tensor {
         let bs = z.size()[0];
+        let linear = z.matmul(&self.linear_decode) + &self.linear_mean;
+        if self.networks_idle {
+            return self.displaced(&linear);
+        }
         let c = *self.shape.encoder.last().expect("encoder layers") as i64;
         let x = self
             .decoder_fc
@@ -477,8 +493,7 @@ impl Space {
             &[per_vertex, k.uv.unsqueeze(0).expand([bs, v, 2], false)],
             2,
         );
-        let linear = (z.matmul(&self.linear_decode) + &self.linear_mean).reshape([bs, v, 3]);
-        self.displaced(&(self.r.forward(&input) * DISPLACEMENT_SCALE + linear))
+        self.displaced(&(self.r.forward(&input) * DISPLACEMENT_SCALE + linear.reshape([bs, v, 3])))
     }
 
     /// The rest garment moved by rest-frame displacements `d [B, V, 3]` (or `[B, 3V]`).
@@ -532,6 +547,26 @@ impl Space {
     pub fn freeze(&mut self) {
         self.vs.freeze();
         self.frozen_weights = Some(tch::no_grad(|| self.kernel_weights()));
+        let r_last = self
+            .vs
+            .variables()
+            .keys()
+            .filter_map(|n| {
+                n.strip_prefix("r.")?
+                    .split('.')
+                    .next()?
+                    .parse::<usize>()
+                    .ok()
+            })
+            .max();
+        let mut outputs = vec!["enc_fc.weight".to_string(), "enc_fc.bias".to_string()];
+        outputs.extend(
+            r_last
+                .map(|k| [format!("r.{k}.weight"), format!("r.{k}.bias")])
+                .into_iter()
+                .flatten(),
+        );
+        self.networks_idle = all_zero(&self.vs, &outputs);
     }
 
     /// Skins canonical garments `[B, V, 3]` by the seeds' transforms `m [B, N, 12]`.
@@ -568,6 +603,15 @@ impl Space {
 }
 
 /// A var store's tensors by name, sorted (the file's and Adam's order).
+/// Whether every one of the named variables exists and is all zero.
+pub fn all_zero(vs: &nn::VarStore, names: &[String]) -> bool {
+    let vars = vs.variables();
+    names.iter().all(|n| {
+        vars.get(n)
+            .is_some_and(|t| tch::no_grad(|| t.abs().max().double_value(&[])) == 0.0)
+    })
+}
+
 pub fn sorted_variables(vs: &nn::VarStore) -> Vec<(String, Tensor)> {
     let mut v: Vec<(String, Tensor)> = vs.variables().into_iter().collect();
     v.sort_by(|a, b| a.0.cmp(&b.0));
@@ -748,5 +792,47 @@ pub(crate) mod tests {
             .try_into()
             .unwrap();
         assert!(var.iter().all(|&x| (x - 1.0).abs() < 1e-3), "{var:?}");
+    }
+    #[test]
+    fn a_frozen_space_with_zero_output_layers_skips_its_networks_exactly() {
+        let (mut space, mesh) = small_space();
+        let v = mesh.vertex_count() as i64;
+        let eye = Tensor::from_slice(&[1f32, 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0.]);
+        let m =
+            eye.reshape([1, 1, 12]) + Tensor::randn([3, 3, 12], (Kind::Float, Device::Cpu)) * 0.2;
+        let g = space.consts.rest.unsqueeze(0)
+            + Tensor::randn([3, v, 3], (Kind::Float, Device::Cpu)) * 0.05;
+        let b = Tensor::randn([3, 3, 3], (Kind::Float, Device::Cpu)) * 0.1;
+        space.init_linear(&space.rest_displacements(&g, &m));
+        space.freeze();
+        assert!(space.networks_idle(), "untrained output layers are zero");
+        let fast = (
+            space.encode(&g, &b, &m),
+            space.canonical(&space.encode(&g, &b, &m)),
+        );
+        space.networks_idle = false;
+        let slow = (
+            space.encode(&g, &b, &m),
+            space.canonical(&space.encode(&g, &b, &m)),
+        );
+        for (a, b) in [(&fast.0, &slow.0), (&fast.1, &slow.1)] {
+            let diff = (a - b).abs().max().double_value(&[]);
+            assert!(
+                diff == 0.0,
+                "skipping the networks changed a result by {diff}"
+            );
+        }
+        let shape = super::super::MotionShape::for_space(&space.shape.encoder, 2);
+        let motion = super::super::MotionEncoder::new(shape, &space, Device::Cpu);
+        assert!(
+            motion.residual_idle(),
+            "the untrained residual's output layer is zero"
+        );
+        // A trained output layer is not skipped.
+        tch::no_grad(|| {
+            let _ = space.vs.variables()["enc_fc.bias"].get(0).fill_(0.1);
+        });
+        space.freeze();
+        assert!(!space.networks_idle());
     }
 }
