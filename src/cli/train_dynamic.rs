@@ -93,6 +93,9 @@ pub struct Args {
     /// makes a round ~3× slower).
     #[arg(long)]
     pub rollout_fix: bool,
+    /// With --rollout-fix: the clearance from the body the fix keeps (as `rollout`'s).
+    #[arg(long, default_value_t = 2.0)]
+    pub collision_margin_mm: f32,
     /// Stage dynamic: channels of the motion features `E_t`.
     #[arg(long, default_value_t = 16)]
     pub motion_features: usize,
@@ -388,7 +391,7 @@ impl Args {
                 let rolled = roll_clips(
                     &trainer.file,
                     std::slice::from_ref(&s),
-                    false,
+                    None,
                     device,
                     &mut |f| bar.set_position(f as u64),
                 )?;
@@ -430,7 +433,8 @@ impl Args {
             self.output.json,
         );
         let rounds = trainer.fit_on_rollouts(self.rollout_rounds, &mut |file, round| {
-            roll_clips(file, train, self.rollout_fix, device, &mut |f| {
+            let fix = self.rollout_fix.then_some(self.collision_margin_mm * 1e-3);
+            roll_clips(file, train, fix, device, &mut |f| {
                 bar.set_position(round as u64 * frames + f as u64)
             })
         })?;
@@ -478,18 +482,21 @@ impl Args {
 
 /// Every frame of `clips` as the model in `file` plays them (`rollout::roll_out`, latents
 /// held in the training range) from each clip's first simulated frame, `[F, V, 3]` in the
-/// clips' order; `done` gets the frames so far.
+/// clips' order; with `fix`, through the collision fix keeping that clearance (metres); `done`
+/// gets the frames so far.
 fn roll_clips(
     file: &ModelFile,
     clips: &[Sequence],
-    collision_fix: bool,
+    fix: Option<f32>,
     device: tch::Device,
     done: &mut dyn FnMut(usize),
 ) -> Result<tch::Tensor> {
+    let defaults = RolloutSettings::default();
     let settings = RolloutSettings {
-        collision_fix,
+        collision_fix: fix.is_some(),
+        margin: fix.unwrap_or(defaults.margin),
         measure_collisions: false,
-        ..RolloutSettings::default()
+        ..defaults
     };
     let mut frames: Vec<Vec<[f32; 3]>> = Vec::new();
     for s in clips {

@@ -308,6 +308,29 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
     let after = rounds[1]["train_rollout_mean_mm"].as_f64().unwrap();
     eprintln!("roll-out of the training frames: {before:.3} mm teacher-forced fit, {after:.3} mm refitted");
     assert!(after < 0.8 * before, "{before:.3} mm then {after:.3} mm");
+    // --rollout-fix: the rounds roll out through the collision fix (a 30 mm clearance makes it
+    // fire on every frame), so the first round's roll-out is not the plain one.
+    let (_, fixed) = motion_model(
+        &dir,
+        &sim,
+        "refit_fixed.safetensors",
+        &[
+            "--ridge",
+            "1",
+            "--rollout-rounds",
+            "1",
+            "--rollout-fix",
+            "--collision-margin-mm",
+            "30",
+        ],
+    );
+    let first = fixed["rollout_rounds"][0]["train_rollout_mean_mm"]
+        .as_f64()
+        .unwrap();
+    assert!(
+        (first - before).abs() > 0.01,
+        "with the fix {first:.3} mm, without {before:.3} mm"
+    );
     let o = garmentbake_in_root(&["inspect", model.to_str().unwrap()]);
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(text.contains("dynamic"), "{text}");
