@@ -8,7 +8,7 @@
 use crate::body::{nearest_offsets, Body};
 use crate::geometry::PointIndex;
 use crate::models::dynamic::motion::History;
-use crate::models::dynamic::{BodyFrames, Dynamic, MeshLaplacian, Seeds};
+use crate::models::dynamic::{BodyFrames, Dynamic, MeshLaplacian, Seeds, Space};
 use crate::models::file::ModelFile;
 use crate::rig::JointTransform;
 use anyhow::{bail, Result};
@@ -286,9 +286,11 @@ fn resolve_collisions(
         return (garment.shallow_clone(), before, before, 0);
     };
     let target_laplacian = tch::no_grad(|| laplacian.of(garment));
+    // The pose is fixed over the iterations: blend the seeds' transforms once.
+    let blended = tch::no_grad(|| space.blended(transforms));
     let resolved = |theta: &Tensor| {
         let offsets = space.at_vertices(theta);
-        space.skin(&space.offset_canonical(canonical, &offsets), transforms)
+        Space::skin_blended(&space.offset_canonical(canonical, &offsets), &blended)
     };
     for _ in 0..s.iterations {
         let g = resolved(&theta);

@@ -571,7 +571,12 @@ impl Space {
 
     /// Skins canonical garments `[B, V, 3]` by the seeds' transforms `m [B, N, 12]`.
     pub fn skin(&self, canonical: &Tensor, m: &Tensor) -> Tensor {
-        let (rot, shift) = self.blended(m);
+        Self::skin_blended(canonical, &self.blended(m))
+    }
+
+    /// [`Space::skin`] by per-vertex transforms already blended ([`Space::blended`]), for
+    /// callers that skin many garments under one pose.
+    pub fn skin_blended(canonical: &Tensor, (rot, shift): &(Tensor, Tensor)) -> Tensor {
         rot.matmul(&canonical.unsqueeze(3)).squeeze_dim(3) + shift
     }
 
