@@ -46,14 +46,13 @@ pub fn between(
     let g = Tensor::from_slice(&flat)
         .reshape([2, -1, 3])
         .to_device(device);
-    let frames = tch::no_grad(|| {
+    let (garments, z) = tch::no_grad(|| {
         let z = space.encode(&g, &at_ends.seeds, &at_ends.transforms);
         let t = Tensor::linspace(0.0, 1.0, (b - a + 1) as i64, (Kind::Float, device)).unsqueeze(1);
         let path = z.get(0).unsqueeze(0) * (1.0 - &t) + z.get(1).unsqueeze(0) * &t;
         let garments = space.skin(&space.canonical(&path), &bodies.transforms);
         (garments, z)
     });
-    let (garments, z) = frames;
     let v = garment_a.len();
     let flat: Vec<f32> = garments.reshape([-1]).try_into()?;
     let latent = |i: i64| -> Result<Vec<f32>> { Ok(z.get(i).try_into()?) };

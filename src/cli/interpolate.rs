@@ -101,13 +101,7 @@ impl Execute for Args {
         let path = between(&file, &poses, (a, &sim[a]), (b, &sim[b]))?;
         write_cache(&self.out, &file.garment, &path.frames, fps)?;
         let (per_frame, summary) = stats::of(
-            &Series {
-                body: &file.body,
-                rest: &file.garment.positions,
-                triangles: &file.garment.triangles,
-                pinned: &[],
-                fps,
-            },
+            &Series::unpinned(&file.body, &file.garment, fps),
             &path.frames,
             &poses[a..=b],
             &[],

@@ -272,13 +272,7 @@ impl Execute for Args {
         })?;
         bar.finish_and_clear();
         let (per_frame, summary) = stats::of(
-            &Series {
-                body: &file.body,
-                rest: &file.garment.positions,
-                triangles: &file.garment.triangles,
-                pinned: &[],
-                fps,
-            },
+            &Series::unpinned(&file.body, &file.garment, fps),
             &rollout.frames,
             &poses,
             &[],

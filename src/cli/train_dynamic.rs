@@ -503,10 +503,9 @@ fn roll_clips(
         let Some(first) = s.garment.first() else {
             continue;
         };
-        let poses: Vec<_> = (0..s.garment.len()).map(|f| s.clip.local_pose(f)).collect();
         let before = frames.len();
         let init = Init::Garment(first.clone());
-        let rolled = for_model(file, &poses, &init, settings.clone(), &mut |f| {
+        let rolled = for_model(file, &s.poses(), &init, settings.clone(), &mut |f| {
             done(before + f)
         })?;
         frames.extend(rolled.frames);

@@ -43,6 +43,19 @@ pub struct Series<'a> {
     pub fps: f32,
 }
 
+impl<'a> Series<'a> {
+    /// A garment with no pinned vertices (a model's output) on `body`.
+    pub fn unpinned(body: &'a Body, garment: &'a crate::geometry::TriMesh, fps: f32) -> Series<'a> {
+        Series {
+            body,
+            rest: &garment.positions,
+            triangles: &garment.triangles,
+            pinned: &[],
+            fps,
+        }
+    }
+}
+
 /// Stats of `frames` (the clip's) posed by `poses`; `previous` is the frame before the first
 /// (the lead-in's last), for the first frame's speed.
 pub fn of(

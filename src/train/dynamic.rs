@@ -35,6 +35,15 @@ pub struct Sequence {
     pub garment: Vec<Vec<[f32; 3]>>,
 }
 
+impl Sequence {
+    /// The clip's pose at each simulated frame.
+    pub fn poses(&self) -> Vec<Vec<crate::rig::JointTransform>> {
+        (0..self.garment.len())
+            .map(|f| self.clip.local_pose(f))
+            .collect()
+    }
+}
+
 #[derive(Clone, Debug)]
 pub struct Settings {
     pub shape: SpaceShape,
@@ -91,8 +100,7 @@ impl FrameData {
             clip_starts.push(frames);
             frames += s.garment.len();
             g.extend(s.garment.iter().flatten().flatten().copied());
-            let poses: Vec<_> = (0..s.garment.len()).map(|f| s.clip.local_pose(f)).collect();
-            parts.push(BodyFrames::new(body, seeds, &poses, device));
+            parts.push(BodyFrames::new(body, seeds, &s.poses(), device));
         }
         FrameData {
             garment: Tensor::from_slice(&g)

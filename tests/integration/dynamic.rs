@@ -36,6 +36,15 @@ fn short_sim(dir: &Path) -> PathBuf {
     out
 }
 
+/// A test folder, its six simulated frames and the untrained (linear, 64-d) space of them.
+fn untrained_space(name: &str) -> (PathBuf, PathBuf, PathBuf) {
+    let dir = out_dir(name);
+    let sim = short_sim(&dir);
+    let space = dir.join("space.safetensors");
+    train(&sim, &space, "0", &[]);
+    (dir, sim, space)
+}
+
 fn train(sim: &Path, out: &Path, epochs: &str, extra: &[&str]) -> serde_json::Value {
     let mut args = vec![
         "train-dynamic",
@@ -492,10 +501,7 @@ fn rollout_refuses_a_space_only_model_and_a_cache_of_another_mesh() {
     if blender_skipped() {
         return;
     }
-    let dir = out_dir("dyn_rollout_bad");
-    let sim = short_sim(&dir);
-    let space = dir.join("space.safetensors");
-    train(&sim, &space, "0", &[]);
+    let (dir, sim, space) = untrained_space("dyn_rollout_bad");
     let fails_with = |model: &Path, init: &str, out: &Path, extra: &[&str]| {
         let mut args = vec![
             "rollout",
@@ -616,10 +622,7 @@ fn a_latent_walk_ends_on_its_frames_and_previews_from_its_start() {
     if blender_skipped() {
         return;
     }
-    let dir = out_dir("dyn_interpolate");
-    let sim = short_sim(&dir);
-    let space = dir.join("space.safetensors");
-    train(&sim, &space, "0", &[]);
+    let (dir, sim, space) = untrained_space("dyn_interpolate");
     let walk = dir.join("walk.pc2");
     let args = |between: &'static str, out: &Path| {
         vec![

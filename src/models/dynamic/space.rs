@@ -770,16 +770,21 @@ pub(crate) mod tests {
         assert_eq!(mesh.vertex_count(), 16);
     }
 
-    #[test]
-    fn unskinning_inverts_skinning_and_the_linear_path_fits_its_frames() {
-        let (mut space, mesh) = small_space();
-        let v = mesh.vertex_count() as i64;
-        // Three frames: random seed transforms near identity, random garments.
+    /// Three frames: random seed transforms near identity `[3, 3, 12]`, random garments.
+    fn random_frames(space: &Space) -> (Tensor, Tensor) {
         let eye = Tensor::from_slice(&[1f32, 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0.]);
         let m =
             eye.reshape([1, 1, 12]) + Tensor::randn([3, 3, 12], (Kind::Float, Device::Cpu)) * 0.2;
+        let v = space.consts.rest.size()[0];
         let g = space.consts.rest.unsqueeze(0)
             + Tensor::randn([3, v, 3], (Kind::Float, Device::Cpu)) * 0.05;
+        (m, g)
+    }
+
+    #[test]
+    fn unskinning_inverts_skinning_and_the_linear_path_fits_its_frames() {
+        let (mut space, _) = small_space();
+        let (m, g) = random_frames(&space);
         let d = space.rest_displacements(&g, &m);
         let back = space.skin(&space.displaced(&d), &m);
         let diff = (&back - &g).abs().max().double_value(&[]);
@@ -800,13 +805,8 @@ pub(crate) mod tests {
     }
     #[test]
     fn a_frozen_space_with_zero_output_layers_skips_its_networks_exactly() {
-        let (mut space, mesh) = small_space();
-        let v = mesh.vertex_count() as i64;
-        let eye = Tensor::from_slice(&[1f32, 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0.]);
-        let m =
-            eye.reshape([1, 1, 12]) + Tensor::randn([3, 3, 12], (Kind::Float, Device::Cpu)) * 0.2;
-        let g = space.consts.rest.unsqueeze(0)
-            + Tensor::randn([3, v, 3], (Kind::Float, Device::Cpu)) * 0.05;
+        let (mut space, _) = small_space();
+        let (m, g) = random_frames(&space);
         let b = Tensor::randn([3, 3, 3], (Kind::Float, Device::Cpu)) * 0.1;
         space.init_linear(&space.rest_displacements(&g, &m));
         space.freeze();
