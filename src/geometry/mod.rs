@@ -5,6 +5,7 @@
 //! Functions that take a mesh assume it passed [`TriMesh::validate`] (the readers guarantee that):
 //! bad *input* is rejected at the file boundary with an error, not deep inside the maths.
 
+pub mod candidates;
 pub mod edges;
 pub mod laplacian;
 pub mod mesh;
@@ -17,6 +18,7 @@ pub mod winding;
 #[cfg(test)]
 pub(crate) mod test_meshes;
 
+pub use candidates::CandidateTree;
 pub use laplacian::Laplacian;
 pub use mesh::{FaceVaryingUv, MeshError, TriMesh};
 pub use nearest::{NearestError, PointIndex};

@@ -96,17 +96,6 @@ impl PointIndex {
         out
     }
 
-    /// Up to `k` indices of points near `p`, nearest first, without the exact tie and duplicate
-    /// handling of [`PointIndex::k_nearest`] (a duplicate position reports its lowest index
-    /// once). Cheaper; for candidate lists that are resolved exactly later. Deterministic.
-    pub fn candidates(&self, p: [f32; 3], k: usize) -> impl Iterator<Item = u32> + '_ {
-        let want = NonZeroUsize::new(k).unwrap_or(NonZeroUsize::MIN);
-        self.tree
-            .nearest_n::<SquaredEuclidean>(&p, want)
-            .into_iter()
-            .map(|hit| self.duplicates[hit.item as usize][0])
-    }
-
     /// Every point within `radius` of `p` (duplicates included) with its distance, unordered.
     pub fn within(&self, p: [f32; 3], radius: f32) -> Vec<(u32, f32)> {
         self.expand(
@@ -146,7 +135,7 @@ impl std::fmt::Debug for PointIndex {
 }
 
 /// Distinct points (in order of first appearance) and, for each, the original indices there.
-fn group_duplicates(points: &[[f32; 3]]) -> (Vec<[f32; 3]>, Vec<Vec<u32>>) {
+pub(super) fn group_duplicates(points: &[[f32; 3]]) -> (Vec<[f32; 3]>, Vec<Vec<u32>>) {
     let mut slot: HashMap<[u32; 3], usize> = HashMap::with_capacity(points.len());
     let mut distinct = Vec::new();
     let mut duplicates: Vec<Vec<u32>> = Vec::new();

@@ -6,6 +6,7 @@ pub mod dynamic;
 pub mod file;
 pub mod pbns;
 pub mod pose_features;
+pub mod sparse_skin;
 
 pub use pbns::{Pbns, PbnsShape};
 use serde::{Deserialize, Serialize};

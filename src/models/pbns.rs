@@ -7,6 +7,7 @@
 //! the sparsity pattern fixed means baking the trained skin loses nothing.
 
 use super::pose_features::PoseBatch;
+use super::sparse_skin;
 use crate::rig::{JointTransform, Skeleton, Skin};
 use tch::{Device, Kind, Tensor};
 
@@ -225,10 +226,33 @@ impl Pbns {
     }
 
     /// The garment of every pose of `poses` as one `[P, N, 3]` tensor, in chunks, no gradients.
+    /// On the CPU the skinning blends only each vertex's slots (as the training step does).
     pub fn predict(&self, poses: &PoseBatch) -> Tensor {
         super::predict_chunks(poses.len(), |s, n| {
-            self.forward(&poses.slice(s, n)).vertices
+            let batch = poses.slice(s, n);
+            if self.psd.device() != Device::Cpu {
+                return self.forward(&batch).vertices;
+            }
+            let rest = self.template.unsqueeze(0) + self.displacement(&batch.features);
+            let rest_points: Vec<f32> = flat(&rest, Kind::Float);
+            let skinning: Vec<f32> = flat(&batch.skinning, Kind::Float);
+            let (joints, weights) = self.slot_arrays();
+            let slots = sparse_skin::Slots {
+                joints: &joints,
+                weights: &weights,
+                influences: self.shape.influences,
+            };
+            let x = sparse_skin::skin(&rest_points, &skinning, self.shape.joints, &slots);
+            Tensor::from_slice(&x.points).view(rest.size().as_slice())
         })
+    }
+
+    /// Each vertex's slot joints and blend weights, `[N * influences]` each, as arrays.
+    pub fn slot_arrays(&self) -> (Vec<i64>, Vec<f32>) {
+        (
+            flat(&self.joints, Kind::Int64),
+            flat(&self.weights(), Kind::Float),
+        )
     }
 
     /// [`Pbns::predict`] as points on the CPU, one list per pose.

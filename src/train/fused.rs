@@ -18,6 +18,8 @@ pub struct ClothArrays {
     pub hinges: Vec<[u32; 2]>,
     pub hinge_weight: Vec<f32>,
     pub mass: Vec<f32>,
+    /// Vertices whose rest-space displacement the pinning term holds at zero.
+    pub pinned: Vec<u32>,
 }
 
 /// Each garment vertex's candidate body vertices in each pose of the batch.
@@ -89,6 +91,30 @@ pub fn potential(
         ],
         grad,
     }
+}
+
+/// The pinning term `weight · mean_b Σ_pinned |D|²` of the rest-space displacement `D`
+/// (`batch` × N × 3); adds its gradient to `grad` (laid out like `D`).
+pub fn pin(
+    cloth: &ClothArrays,
+    weight: f32,
+    displacement: &[f32],
+    batch: usize,
+    grad: &mut [f32],
+) -> f64 {
+    let n = cloth.mass.len();
+    let scale = 2.0 * weight / batch as f32;
+    let mut sum = 0.0f64;
+    for b in 0..batch {
+        for &v in &cloth.pinned {
+            let i = 3 * (b * n + v as usize);
+            for (d, g) in displacement[i..i + 3].iter().zip(&mut grad[i..i + 3]) {
+                sum += (d * d) as f64;
+                *g += scale * d;
+            }
+        }
+    }
+    sum / batch as f64 * weight as f64
 }
 
 /// `Σ w_e (|e| − |e_T|)²` and `Σ |e − e_T|`; adds `k ∂/∂x` of the energy to `g`.

@@ -60,6 +60,7 @@ impl Cloth {
             hinges: h.iter().map(|h| h.faces).collect(),
             hinge_weight: h.iter().map(|h| mean(&bend_mul, h.edge)).collect(),
             mass,
+            pinned: pinned.to_vec(),
         };
         Ok(Cloth {
             edge_ends: idx((0..2)

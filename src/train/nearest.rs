@@ -10,7 +10,7 @@
 
 use super::fused::Contacts;
 use crate::body::Body;
-use crate::geometry::PointIndex;
+use crate::geometry::{CandidateTree, PointIndex};
 use crate::rig::JointTransform;
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -18,12 +18,15 @@ use std::thread::JoinHandle;
 use tch::{Device, Kind, Tensor};
 
 /// Points, normals and tree of the body subset in one pose.
-type PosedSubset = (Vec<[f32; 3]>, Vec<[f32; 3]>, PointIndex);
+type PosedSubset = (Vec<[f32; 3]>, Vec<[f32; 3]>, CandidateTree);
 
 struct CpuCopy {
-    points: Vec<[f32; 3]>,
+    /// Shared with refresh workers, which start each query from the current lists.
+    points: Arc<Vec<[f32; 3]>>,
     normals: Vec<[f32; 3]>,
-    candidates: Vec<i64>,
+    candidates: Arc<Vec<i64>>,
+    /// Whether `candidates` came from a refresh (before one they are all row 0).
+    refreshed: bool,
 }
 
 pub struct Correspondences {
@@ -31,7 +34,7 @@ pub struct Correspondences {
     points: Tensor,
     normals: Tensor,
     /// One tree per pose over the posed subset (shared with refresh workers).
-    trees: Arc<Vec<PointIndex>>,
+    trees: Arc<Vec<CandidateTree>>,
     /// Candidate rows of `points`, `[P, N, C]`.
     candidates: Tensor,
     /// On the CPU: `points`, `normals` and `candidates` as arrays, for [`super::fused`].
@@ -62,7 +65,7 @@ impl Correspondences {
                 let m = body.skeleton.skinning_matrices(pose);
                 let p = skin.skin_points(&rest, &m);
                 let n = skin.skin_normals(&rest_n, &m);
-                let tree = PointIndex::new(&p).expect("posed body is finite");
+                let tree = CandidateTree::new(&p);
                 (p, n, tree)
             })
             .collect();
@@ -76,9 +79,10 @@ impl Correspondences {
         let points = flat(&|x| &x.0);
         let normals = flat(&|x| &x.1);
         let cpu = (device == Device::Cpu).then(|| CpuCopy {
-            points: posed.iter().flat_map(|x| x.0.iter().copied()).collect(),
+            points: Arc::new(posed.iter().flat_map(|x| x.0.iter().copied()).collect()),
             normals: posed.iter().flat_map(|x| x.1.iter().copied()).collect(),
-            candidates: vec![0; poses.len() * garment_vertices * per_vertex],
+            candidates: Arc::new(vec![0; poses.len() * garment_vertices * per_vertex]),
+            refreshed: false,
         });
         let trees = Arc::new(posed.into_iter().map(|x| x.2).collect());
         Correspondences {
@@ -121,7 +125,13 @@ impl Correspondences {
 
     /// New candidate lists from the garment's current positions in every pose, now.
     pub fn refresh(&mut self, garment: &[Vec<[f32; 3]>]) {
-        let lists = candidate_lists(&self.trees, garment, self.subset, self.per_vertex);
+        let lists = candidate_lists(
+            &self.trees,
+            garment,
+            self.subset,
+            self.per_vertex,
+            self.previous().as_ref(),
+        );
         self.apply(lists);
     }
 
@@ -163,7 +173,8 @@ impl Correspondences {
         });
         self.candidates = Tensor::cat(&lists, 0).to_device(self.candidates.device());
         if let Some(cpu) = &mut self.cpu {
-            cpu.candidates = crate::models::pbns::flat(&self.candidates, Kind::Int64);
+            cpu.candidates = Arc::new(crate::models::pbns::flat(&self.candidates, Kind::Int64));
+            cpu.refreshed = true;
         }
     }
 
@@ -176,7 +187,18 @@ impl Correspondences {
     ) -> JoinHandle<Vec<i64>> {
         let trees = Arc::clone(&self.trees);
         let (m, c) = (self.subset, self.per_vertex);
-        std::thread::spawn(move || candidate_lists(&trees, &garment(), m, c))
+        let previous = self.previous();
+        std::thread::spawn(move || candidate_lists(&trees, &garment(), m, c, previous.as_ref()))
+    }
+
+    /// The installed lists and the posed body they index (CPU, after a first refresh): a
+    /// refresh starts each query from them.
+    fn previous(&self) -> Option<Previous> {
+        let cpu = self.cpu.as_ref()?;
+        cpu.refreshed.then(|| Previous {
+            lists: Arc::clone(&cpu.candidates),
+            points: Arc::clone(&cpu.points),
+        })
     }
 
     /// Installs candidate lists from [`Correspondences::spawn_refresh`].
@@ -186,7 +208,8 @@ impl Correspondences {
             .view(shape.as_slice())
             .to_device(self.candidates.device());
         if let Some(cpu) = &mut self.cpu {
-            cpu.candidates = lists;
+            cpu.candidates = Arc::new(lists);
+            cpu.refreshed = true;
         }
     }
 
@@ -225,28 +248,49 @@ pub fn body_subset(body: &Body, garment: &[[f32; 3]], reach: f32) -> Vec<u32> {
         .collect()
 }
 
-/// Rows of the flattened `[P * m, 3]` body tensor: `c` per garment vertex per pose.
+/// Candidate lists of a refresh and the posed body rows they index.
+struct Previous {
+    lists: Arc<Vec<i64>>,
+    points: Arc<Vec<[f32; 3]>>,
+}
+
+/// Rows of the flattened `[P * m, 3]` body tensor: `c` per garment vertex per pose. With the
+/// `previous` lists each query is bounded by the farthest previous candidate (the garment moves
+/// little between refreshes), which gives the same candidates for a fraction of the tree walk.
 fn candidate_lists(
-    trees: &[PointIndex],
+    trees: &[CandidateTree],
     garment: &[Vec<[f32; 3]>],
     m: usize,
     c: usize,
+    previous: Option<&Previous>,
 ) -> Vec<i64> {
-    garment
-        .par_iter()
-        .zip(trees)
+    let n = garment.first().map_or(0, Vec::len);
+    let mut lists = vec![0i64; garment.len() * n * c];
+    // One pose per task, written in place (no per-pose vectors to gather afterwards).
+    lists
+        .par_chunks_mut((n * c).max(1))
+        .zip(garment.par_iter().zip(trees))
         .enumerate()
-        .flat_map_iter(|(pose, (x, tree))| {
+        .for_each(|(pose, (out, (x, tree)))| {
             let base = (pose * m) as i64;
-            let mut out = Vec::with_capacity(x.len() * c);
-            for &p in x {
-                let start = out.len();
-                out.extend(tree.candidates(p, c).map(|i| base + i as i64));
+            let mut list = Vec::with_capacity(c);
+            for (v, (&p, out)) in x.iter().zip(out.chunks_exact_mut(c)).enumerate() {
+                let bound = previous.map_or(f32::INFINITY, |prev| {
+                    let rows = &prev.lists[(pose * n + v) * c..][..c];
+                    rows.iter()
+                        .map(|&r| squared_distance(prev.points[r as usize], p))
+                        .fold(0.0f32, f32::max)
+                });
+                tree.nearest(p, c, bound, &mut list);
                 // A tiny subset may hold fewer than c points: repeat the nearest.
-                let first = out[start];
-                out.resize(start + c, first);
+                for (k, slot) in out.iter_mut().enumerate() {
+                    *slot = base + *list.get(k).unwrap_or(&list[0]) as i64;
+                }
             }
-            out
-        })
-        .collect()
+        });
+    lists
+}
+
+fn squared_distance(a: [f32; 3], b: [f32; 3]) -> f32 {
+    (0..3).map(|k| (a[k] - b[k]).powi(2)).sum()
 }

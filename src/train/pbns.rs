@@ -18,6 +18,7 @@ use crate::models::file::{
 };
 use crate::models::pbns::flat;
 use crate::models::pose_features::{tensor_points, PoseBatch, PER_JOINT};
+use crate::models::sparse_skin;
 use crate::models::{Model, Pbns, PbnsShape};
 use crate::motion::{load_clip, read_maps};
 use crate::rig::{weights, SkelAnimation};
@@ -359,6 +360,14 @@ struct Best {
 /// Named trainable tensors of the model at some epoch.
 type Snapshot = Vec<(String, Tensor)>;
 
+/// One step's loss values (as [`TERM_NAMES`] lists them), the parameters' gradients (in
+/// [`Pbns::parameters`] order) and when its forward, candidate lookup and losses ended.
+struct Pass {
+    values: Vec<f64>,
+    grads: Vec<Tensor>,
+    times: [Instant; 3],
+}
+
 /// A refresh on a worker thread and the weights whose output it queries.
 struct PendingRefresh {
     job: std::thread::JoinHandle<Vec<i64>>,
@@ -669,47 +678,15 @@ impl Trainer {
 
     /// One optimisation step on the training poses `ids`.
     pub fn step(&mut self, ids: &[i64], lr: f64) -> Result<StepValues, Blowup> {
-        let device = self.settings.device;
         let t0 = Instant::now();
-        let index = Tensor::from_slice(ids).to_device(device);
+        let index = Tensor::from_slice(ids).to_device(self.settings.device);
         let batch = self.train.select(&index);
-        let out = self.model().forward(&batch);
-        let t1 = Instant::now();
-        let fabric = &self.file.info.fabric;
-        let (loss, values, t2) = match self.correspondences.contacts(ids) {
-            // On the CPU: the fused potential, candidate lookup included.
-            Some(contacts) => {
-                let x = &out.vertices;
-                let xs: Vec<f32> = flat(x, Kind::Float);
-                let f = fused::potential(&self.cloth.arrays, fabric, &xs, ids.len(), &contacts);
-                let pin = self.cloth.pin(&out.displacement) * fabric.pin as f64;
-                let mut values = f.weighted.to_vec();
-                values.push(pin.double_value(&[]));
-                values.extend(f.metrics);
-                // Σ x·∇E has the gradient ∇E at x: autograd takes it through LBS and the network.
-                let grad = Tensor::from_slice(&f.grad).view(x.size().as_slice());
-                ((x * &grad).sum(Kind::Float) + pin, values, t1)
-            }
-            None => {
-                let (body_points, body_normals) =
-                    self.correspondences.resolve(&index, &out.vertices);
-                let t2 = Instant::now();
-                let terms = losses::potential(
-                    &self.cloth,
-                    fabric,
-                    &out.vertices,
-                    &out.displacement,
-                    &body_points,
-                    &body_normals,
-                );
-                let mut all: Vec<Tensor> = terms.weighted.iter().map(Tensor::detach).collect();
-                all.extend(terms.metrics.iter().map(Tensor::shallow_clone));
-                let values: Vec<f64> = flat(&Tensor::stack(&all, 0), Kind::Double);
-                (terms.total(), values, t2)
-            }
+        let pass = match self.correspondences.contacts(ids) {
+            Some(contacts) => self.fused_pass(&batch, &contacts),
+            None => self.tensor_pass(&index, &batch),
         };
-        let t3 = Instant::now();
-        let named: Vec<(&'static str, f64)> = TERM_NAMES.into_iter().zip(values.clone()).collect();
+        let named: Vec<(&'static str, f64)> =
+            TERM_NAMES.into_iter().zip(pass.values.clone()).collect();
         Blowup::check(&named, self.epoch() + 1, self.adam.step as usize + 1)?;
         let named = self.model().parameters(self.settings.train_weights);
         // The skin logits move on another scale than the network (a weight going from 1e-4 to
@@ -725,11 +702,9 @@ impl Trainer {
             })
             .collect();
         let params: Vec<Tensor> = named.into_iter().map(|(_, t)| t.shallow_clone()).collect();
-        // Gradients handed straight to Adam: none accumulates in (or is zeroed from) the
-        // parameters' .grad.
-        let grads = Tensor::run_backward(&[&loss], &params, false, false);
-        self.adam.update_with(&params, &grads, &rates);
+        self.adam.update_with(&params, &pass.grads, &rates);
         let t4 = Instant::now();
+        let [t1, t2, t3] = pass.times;
         let times = &mut self.times;
         times.forward += t1 - t0;
         times.nearest += t2 - t1;
@@ -737,7 +712,107 @@ impl Trainer {
         times.backward += t4 - t3;
         times.steps += 1;
         times.poses += ids.len();
-        Ok(StepValues::from_scalars(&values))
+        Ok(StepValues::from_scalars(&pass.values))
+    }
+
+    /// The loss values and parameter gradients one step on `ids` would apply, by the fused CPU
+    /// path or by tensor ops with autograd throughout (the reference), without applying them.
+    pub fn step_gradients(&self, ids: &[i64], fused: bool) -> (Vec<f64>, Vec<Tensor>) {
+        let index = Tensor::from_slice(ids).to_device(self.settings.device);
+        let batch = self.train.select(&index);
+        let pass = match self.correspondences.contacts(ids).filter(|_| fused) {
+            Some(contacts) => self.fused_pass(&batch, &contacts),
+            None => self.tensor_pass(&index, &batch),
+        };
+        (pass.values, pass.grads)
+    }
+
+    /// The CPU step: the network and the PSD product with autograd; LBS, the potential and
+    /// their gradients in Rust ([`sparse_skin`], [`fused`]; the candidate lookup is part of the
+    /// potential); the gradient handed back to autograd as `Σ D·∇_D E`. The slot logits only
+    /// enter through LBS, so their gradient needs no autograd at all.
+    fn fused_pass(&self, batch: &PoseBatch, contacts: &fused::Contacts) -> Pass {
+        let model = self.model();
+        let fabric = &self.file.info.fabric;
+        let poses = batch.len();
+        let displacement = model.displacement(&batch.features);
+        let template: Vec<f32> = flat(&model.template, Kind::Float);
+        let d: Vec<f32> = flat(&displacement, Kind::Float);
+        let rest: Vec<f32> = d
+            .iter()
+            .zip(template.iter().cycle())
+            .map(|(d, t)| d + t)
+            .collect();
+        let skinning: Vec<f32> = flat(&batch.skinning, Kind::Float);
+        let (joints, weights) = model.slot_arrays();
+        let slots = sparse_skin::Slots {
+            joints: &joints,
+            weights: &weights,
+            influences: model.shape.influences,
+        };
+        let j = model.shape.joints;
+        let skinned = sparse_skin::skin(&rest, &skinning, j, &slots);
+        let t1 = Instant::now();
+        let f = fused::potential(&self.cloth.arrays, fabric, &skinned.points, poses, contacts);
+        let t3 = Instant::now();
+        // The rest points are T + D: the displacement's gradient is the rest points'.
+        let (mut grad_rest, grad_logits) =
+            sparse_skin::backward(&rest, &skinning, j, &slots, &skinned, &f.grad);
+        let pin = fused::pin(&self.cloth.arrays, fabric.pin, &d, poses, &mut grad_rest);
+        let mut values = f.weighted.to_vec();
+        values.push(pin);
+        values.extend(f.metrics);
+        let g = Tensor::from_slice(&grad_rest).view(displacement.size().as_slice());
+        let surrogate = (&displacement * g).sum(Kind::Float);
+        let network: Vec<Tensor> = model
+            .parameters(false)
+            .into_iter()
+            .map(|(_, t)| t.shallow_clone())
+            .collect();
+        let mut grads = Tensor::run_backward(&[&surrogate], &network, false, false);
+        if self.settings.train_weights {
+            grads.push(Tensor::from_slice(&grad_logits).view(model.logits.size().as_slice()));
+        }
+        Pass {
+            values,
+            grads,
+            times: [t1, t1, t3],
+        }
+    }
+
+    /// The step as tensor ops with autograd throughout (on a device).
+    fn tensor_pass(&self, index: &Tensor, batch: &PoseBatch) -> Pass {
+        let model = self.model();
+        let out = model.forward(batch);
+        let t1 = Instant::now();
+        let (body_points, body_normals) = self.correspondences.resolve(index, &out.vertices);
+        let t2 = Instant::now();
+        let fabric = &self.file.info.fabric;
+        let terms = losses::potential(
+            &self.cloth,
+            fabric,
+            &out.vertices,
+            &out.displacement,
+            &body_points,
+            &body_normals,
+        );
+        let mut all: Vec<Tensor> = terms.weighted.iter().map(Tensor::detach).collect();
+        all.extend(terms.metrics.iter().map(Tensor::shallow_clone));
+        let values: Vec<f64> = flat(&Tensor::stack(&all, 0), Kind::Double);
+        let t3 = Instant::now();
+        let params: Vec<Tensor> = model
+            .parameters(self.settings.train_weights)
+            .into_iter()
+            .map(|(_, t)| t.shallow_clone())
+            .collect();
+        // Gradients handed straight to Adam: none accumulates in (or is zeroed from) the
+        // parameters' .grad.
+        let grads = Tensor::run_backward(&[&terms.total()], &params, false, false);
+        Pass {
+            values,
+            grads,
+            times: [t1, t2, t3],
+        }
     }
 
     /// Runs one epoch; `on_step(done, total)` after each step. Appends to the history.
