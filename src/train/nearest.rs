@@ -27,6 +27,9 @@ struct CpuCopy {
     candidates: Arc<Vec<i64>>,
     /// Whether `candidates` came from a refresh (before one they are all row 0).
     refreshed: bool,
+    /// The lists before the installed ones, whose buffer the next refresh fills: 66 MB for the
+    /// skirt, which a fresh allocation would page in (and zero) at every refresh.
+    spare: Option<Vec<i64>>,
 }
 
 pub struct Correspondences {
@@ -35,8 +38,11 @@ pub struct Correspondences {
     normals: Tensor,
     /// One tree per pose over the posed subset (shared with refresh workers).
     trees: Arc<Vec<CandidateTree>>,
-    /// Candidate rows of `points`, `[P, N, C]`.
+    /// Candidate rows of `points`, `[P, N, C]`, on the device (on the CPU the arrays of `cpu`
+    /// are the lists, and this tensor is made from them only when asked for).
     candidates: Tensor,
+    /// `[P, N, C]`.
+    shape: [usize; 3],
     /// On the CPU: `points`, `normals` and `candidates` as arrays, for [`super::fused`].
     cpu: Option<CpuCopy>,
     subset: usize,
@@ -83,6 +89,7 @@ impl Correspondences {
             normals: posed.iter().flat_map(|x| x.1.iter().copied()).collect(),
             candidates: Arc::new(vec![0; poses.len() * garment_vertices * per_vertex]),
             refreshed: false,
+            spare: None,
         });
         let trees = Arc::new(posed.into_iter().map(|x| x.2).collect());
         Correspondences {
@@ -98,6 +105,7 @@ impl Correspondences {
                 (Kind::Int64, device),
             ),
             cpu,
+            shape: [poses.len(), garment_vertices, per_vertex],
             subset: subset.len(),
             per_vertex,
         }
@@ -106,7 +114,7 @@ impl Correspondences {
     /// The batch's candidates and the posed body as arrays (CPU training only).
     pub fn contacts(&self, poses: &[i64]) -> Option<Contacts<'_>> {
         let cpu = self.cpu.as_ref()?;
-        let per_pose = cpu.candidates.len() / self.candidates.size()[0].max(1) as usize;
+        let per_pose = self.shape[1] * self.shape[2];
         Some(Contacts {
             candidates: poses
                 .iter()
@@ -125,12 +133,14 @@ impl Correspondences {
 
     /// New candidate lists from the garment's current positions in every pose, now.
     pub fn refresh(&mut self, garment: &[Vec<[f32; 3]>]) {
+        let buffer = self.spare_buffer();
         let lists = candidate_lists(
             &self.trees,
             garment,
             self.subset,
             self.per_vertex,
             self.previous().as_ref(),
+            buffer,
         );
         self.apply(lists);
     }
@@ -182,13 +192,24 @@ impl Correspondences {
     /// run there while torch keeps training on its own thread); hand the result to
     /// [`Correspondences::apply`].
     pub fn spawn_refresh(
-        &self,
+        &mut self,
         garment: impl FnOnce() -> Vec<Vec<[f32; 3]>> + Send + 'static,
     ) -> JoinHandle<Vec<i64>> {
         let trees = Arc::clone(&self.trees);
         let (m, c) = (self.subset, self.per_vertex);
         let previous = self.previous();
-        std::thread::spawn(move || candidate_lists(&trees, &garment(), m, c, previous.as_ref()))
+        let buffer = self.spare_buffer();
+        std::thread::spawn(move || {
+            candidate_lists(&trees, &garment(), m, c, previous.as_ref(), buffer)
+        })
+    }
+
+    /// The spare lists' buffer for a refresh to fill (empty if there is none yet).
+    fn spare_buffer(&mut self) -> Vec<i64> {
+        self.cpu
+            .as_mut()
+            .and_then(|cpu| cpu.spare.take())
+            .unwrap_or_default()
     }
 
     /// The installed lists and the posed body they index (CPU, after a first refresh): a
@@ -203,20 +224,37 @@ impl Correspondences {
 
     /// Installs candidate lists from [`Correspondences::spawn_refresh`].
     pub fn apply(&mut self, lists: Vec<i64>) {
-        let shape = self.candidates.size();
-        self.candidates = Tensor::from_slice(&lists)
-            .view(shape.as_slice())
-            .to_device(self.candidates.device());
-        if let Some(cpu) = &mut self.cpu {
-            cpu.candidates = Arc::new(lists);
-            cpu.refreshed = true;
+        match &mut self.cpu {
+            Some(cpu) => {
+                let old = std::mem::replace(&mut cpu.candidates, Arc::new(lists));
+                // The refresh that read the old lists has finished: the buffer is free.
+                cpu.spare = Arc::try_unwrap(old).ok();
+                cpu.refreshed = true;
+            }
+            None => {
+                let shape = self.candidates.size();
+                self.candidates = Tensor::from_slice(&lists)
+                    .view(shape.as_slice())
+                    .to_device(self.candidates.device());
+            }
+        }
+    }
+
+    /// The candidate lists as a `[P, N, C]` tensor on the device.
+    fn candidate_tensor(&self) -> Tensor {
+        match &self.cpu {
+            Some(cpu) => {
+                let [p, n, c] = self.shape.map(|x| x as i64);
+                Tensor::from_slice(&cpu.candidates).view([p, n, c])
+            }
+            None => self.candidates.shallow_clone(),
         }
     }
 
     /// Nearest body point and normal `[B, N, 3]` for the batch's poses `[B]` and garment `x`.
     pub fn resolve(&self, poses: &Tensor, x: &Tensor) -> (Tensor, Tensor) {
         tch::no_grad(|| {
-            let cand = self.candidates.index_select(0, poses);
+            let cand = self.candidate_tensor().index_select(0, poses);
             let size = cand.size();
             let (b, n, c) = (size[0], size[1], size[2]);
             let p = self
@@ -263,9 +301,10 @@ fn candidate_lists(
     m: usize,
     c: usize,
     previous: Option<&Previous>,
+    mut lists: Vec<i64>,
 ) -> Vec<i64> {
     let n = garment.first().map_or(0, Vec::len);
-    let mut lists = vec![0i64; garment.len() * n * c];
+    lists.resize(garment.len() * n * c, 0);
     // One pose per task, written in place (no per-pose vectors to gather afterwards).
     lists
         .par_chunks_mut((n * c).max(1))
