@@ -89,7 +89,9 @@ pub enum RefreshMode {
 impl Settings {
     /// The defaults of the documented recipe (the CLI's defaults are these).
     pub const DEFAULT: Settings = Settings {
-        epochs: 1000,
+        // With pose coverage an epoch holds twice the poses: 500 epochs are the pose-steps of
+        // the 1000 the recipe had before it (docs/pbns.md, "Recipe and training time").
+        epochs: 500,
         batch: 16,
         learning_rate: 1e-3,
         width: 256,
