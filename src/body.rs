@@ -39,10 +39,14 @@ pub fn nearest_offsets(
         .iter()
         .map(|p| {
             let (b, _) = index.nearest(*p);
-            let d = (v3(*p) - v3(body_points[b as usize])).dot(&v3(body_normals[b as usize]));
-            (b, d)
+            (b, offset(*p, body_points, body_normals, b))
         })
         .collect()
+}
+
+/// Signed distance of `p` along the normal of body vertex `b`.
+fn offset(p: [f32; 3], body_points: &[[f32; 3]], body_normals: &[[f32; 3]], b: u32) -> f32 {
+    (v3(p) - v3(body_points[b as usize])).dot(&v3(body_normals[b as usize]))
 }
 
 /// The body in one pose, with its nearest-point index.
@@ -87,6 +91,11 @@ pub fn self_overlap(
 }
 
 impl PosedBody {
+    /// Signed distance of `p` along the normal of body vertex `b` (negative: behind it).
+    pub fn offset(&self, p: [f32; 3], b: u32) -> f32 {
+        offset(p, &self.points, &self.normals, b)
+    }
+
     pub fn new(body: &Body, pose: &[JointTransform]) -> PosedBody {
         let skinning = body.skeleton.skinning_matrices(pose);
         let points = body.skin.skin_points(&body.mesh.positions, &skinning);

@@ -2,7 +2,7 @@
 //! collided vertices (split at body self-overlap), gravity energy. Plain arrays on the CPU,
 //! exact nearest neighbours: shared by training validation, `eval` and the exporters' checks.
 
-use crate::body::{nearest_offsets, Body, PosedBody};
+use crate::body::{Body, PosedBody};
 use crate::fabric::GRAVITY;
 use crate::geometry::{face_normals, PointIndex, SurfaceIndex, Topology, TriMesh};
 use rayon::prelude::*;
@@ -113,6 +113,12 @@ impl ClothGeometry {
 
     /// Metrics of one posed frame against the posed body.
     pub fn frame(&self, x: &[[f32; 3]], body: &PosedBody) -> Metrics {
+        let nearest: Vec<u32> = x.iter().map(|&p| body.index.nearest(p).0).collect();
+        self.frame_with(x, body, &nearest)
+    }
+
+    /// The same with each garment vertex's nearest body vertex already known.
+    pub fn frame_with(&self, x: &[[f32; 3]], body: &PosedBody, nearest: &[u32]) -> Metrics {
         let n = face_normals(x, &self.triangles);
         let bend: f64 = self
             .hinges
@@ -122,7 +128,11 @@ impl ClothGeometry {
                 1.0 - (na[0] * nb[0] + na[1] * nb[1] + na[2] * nb[2]) as f64
             })
             .sum();
-        let offsets = nearest_offsets(x, &body.points, &body.normals, &body.index);
+        let offsets: Vec<(u32, f32)> = x
+            .iter()
+            .zip(nearest)
+            .map(|(p, &b)| (b, body.offset(*p, b)))
+            .collect();
         let inside = offsets.iter().filter(|&&(_, d)| d < 0.0).count();
         let at_overlap = offsets
             .iter()
@@ -148,6 +158,22 @@ impl ClothGeometry {
             .par_iter()
             .zip(bodies)
             .map(|(x, b)| self.frame(x, b))
+            .collect();
+        Metrics::mean(&per)
+    }
+
+    /// [`ClothGeometry::frames`] with each frame's nearest body vertices already known.
+    pub fn frames_with(
+        &self,
+        garment: &[Vec<[f32; 3]>],
+        bodies: &[PosedBody],
+        nearest: &[Vec<u32>],
+    ) -> Metrics {
+        let per: Vec<Metrics> = garment
+            .par_iter()
+            .zip(bodies)
+            .zip(nearest)
+            .map(|((x, b), n)| self.frame_with(x, b, n))
             .collect();
         Metrics::mean(&per)
     }

@@ -91,6 +91,13 @@ impl CandidateTree {
         out.extend_from_slice(&best.id[..best.len]);
     }
 
+    /// The nearest point's index (the lowest of equally near ones).
+    pub fn nearest_one(&self, p: [f32; 3]) -> u32 {
+        let mut out = Vec::with_capacity(1);
+        self.nearest(p, 1, f32::INFINITY, &mut out);
+        out[0]
+    }
+
     fn visit(&self, node: usize, p: [f32; 3], best: &mut Best) {
         let n = self.nodes[node];
         if n.leaf {
@@ -262,6 +269,8 @@ mod tests {
                 assert_eq!(out, want, "query {q}, k {k}, zero bound");
             }
         }
+        let q = [0.3, 0.6, 0.2];
+        assert_eq!(tree.nearest_one(q), brute_force(&points, q, 1)[0]);
         tree.nearest([0.5; 3], 5000, f32::INFINITY, &mut out);
         assert_eq!(out.len(), 1998, "every distinct point once");
     }
