@@ -93,9 +93,15 @@ impl CandidateTree {
 
     /// The nearest point's index (the lowest of equally near ones).
     pub fn nearest_one(&self, p: [f32; 3]) -> u32 {
-        let mut out = Vec::with_capacity(1);
-        self.nearest(p, 1, f32::INFINITY, &mut out);
-        out[0]
+        let (mut d2, mut id) = ([0.0f32], [0u32]);
+        let mut best = Best {
+            d2: &mut d2,
+            id: &mut id,
+            len: 0,
+            limit: f32::INFINITY,
+        };
+        self.visit(0, p, &mut best);
+        id[0]
     }
 
     fn visit(&self, node: usize, p: [f32; 3], best: &mut Best) {
@@ -217,17 +223,7 @@ fn box_distance(n: &Node, p: [f32; 3]) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn lcg_points(n: usize, seed: u64) -> Vec<[f32; 3]> {
-        let mut s = seed;
-        let mut next = move || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((s >> 40) as f32) / (1u64 << 24) as f32
-        };
-        (0..n).map(|_| [next(), next(), next()]).collect()
-    }
+    use crate::geometry::nearest::tests::lcg_points;
 
     fn squared_distance(a: [f32; 3], b: [f32; 3]) -> f32 {
         (0..3).map(|k| (a[k] - b[k]) * (a[k] - b[k])).sum()

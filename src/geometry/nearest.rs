@@ -153,11 +153,11 @@ pub(super) fn group_duplicates(points: &[[f32; 3]]) -> (Vec<[f32; 3]>, Vec<Vec<u
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
 
     /// Small deterministic generator so the test needs no extra crates.
-    fn lcg_points(n: usize, seed: u64) -> Vec<[f32; 3]> {
+    pub(in crate::geometry) fn lcg_points(n: usize, seed: u64) -> Vec<[f32; 3]> {
         let mut s = seed;
         let mut next = move || {
             s = s

@@ -236,23 +236,18 @@ impl Pbns {
             let rest = self.template.unsqueeze(0) + self.displacement(&batch.features);
             let rest_points: Vec<f32> = flat(&rest, Kind::Float);
             let skinning: Vec<f32> = flat(&batch.skinning, Kind::Float);
-            let (joints, weights) = self.slot_arrays();
-            let slots = sparse_skin::Slots {
-                joints: &joints,
-                weights: &weights,
-                influences: self.shape.influences,
-            };
-            let x = sparse_skin::skin(&rest_points, &skinning, self.shape.joints, &slots);
+            let x = sparse_skin::skin(&rest_points, &skinning, self.shape.joints, &self.slots());
             Tensor::from_slice(&x.points).view(rest.size().as_slice())
         })
     }
 
-    /// Each vertex's slot joints and blend weights, `[N * influences]` each, as arrays.
-    pub fn slot_arrays(&self) -> (Vec<i64>, Vec<f32>) {
-        (
-            flat(&self.joints, Kind::Int64),
-            flat(&self.weights(), Kind::Float),
-        )
+    /// Each vertex's slot joints and blend weights as arrays, for [`sparse_skin`].
+    pub fn slots(&self) -> sparse_skin::Slots {
+        sparse_skin::Slots {
+            joints: flat(&self.joints, Kind::Int64),
+            weights: flat(&self.weights(), Kind::Float),
+            influences: self.shape.influences,
+        }
     }
 
     /// [`Pbns::predict`] as points on the CPU, one list per pose.

@@ -6,9 +6,9 @@
 //! gradient (which then needs no autograd at all).
 
 /// A vertex's slot joints and softmax weights, `influences` per vertex.
-pub struct Slots<'a> {
-    pub joints: &'a [i64],
-    pub weights: &'a [f32],
+pub struct Slots {
+    pub joints: Vec<i64>,
+    pub weights: Vec<f32>,
     pub influences: usize,
 }
 

@@ -96,12 +96,16 @@ impl Correspondences {
             points,
             normals,
             trees,
+            // On the CPU the lists live in `cpu`; a device keeps them as a tensor.
             candidates: Tensor::zeros(
-                [
-                    poses.len() as i64,
-                    garment_vertices as i64,
-                    per_vertex as i64,
-                ],
+                match device {
+                    Device::Cpu => [0, garment_vertices as i64, per_vertex as i64],
+                    _ => [
+                        poses.len() as i64,
+                        garment_vertices as i64,
+                        per_vertex as i64,
+                    ],
+                },
                 (Kind::Int64, device),
             ),
             cpu,
@@ -181,10 +185,13 @@ impl Correspondences {
                 })
                 .collect()
         });
-        self.candidates = Tensor::cat(&lists, 0).to_device(self.candidates.device());
-        if let Some(cpu) = &mut self.cpu {
-            cpu.candidates = Arc::new(crate::models::pbns::flat(&self.candidates, Kind::Int64));
-            cpu.refreshed = true;
+        let all = Tensor::cat(&lists, 0);
+        match &mut self.cpu {
+            Some(cpu) => {
+                cpu.candidates = Arc::new(crate::models::pbns::flat(&all, Kind::Int64));
+                cpu.refreshed = true;
+            }
+            None => self.candidates = all,
         }
     }
 
@@ -232,10 +239,10 @@ impl Correspondences {
                 cpu.refreshed = true;
             }
             None => {
-                let shape = self.candidates.size();
+                let [p, n, c] = self.shape.map(|x| x as i64);
                 self.candidates = Tensor::from_slice(&lists)
-                    .view(shape.as_slice())
-                    .to_device(self.candidates.device());
+                    .view([p, n, c])
+                    .to_device(self.points.device());
             }
         }
     }

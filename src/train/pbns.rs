@@ -756,12 +756,7 @@ impl Trainer {
             .map(|(d, t)| d + t)
             .collect();
         let skinning: Vec<f32> = flat(&batch.skinning, Kind::Float);
-        let (joints, weights) = model.slot_arrays();
-        let slots = sparse_skin::Slots {
-            joints: &joints,
-            weights: &weights,
-            influences: model.shape.influences,
-        };
+        let slots = model.slots();
         let j = model.shape.joints;
         let skinned = sparse_skin::skin(&rest, &skinning, j, &slots);
         let t1 = Instant::now();
