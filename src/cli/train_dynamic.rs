@@ -13,7 +13,7 @@ use crate::motion::{load_clip, read_maps};
 use crate::rig::Skeleton;
 use crate::rollout::{for_model, Init, Settings as RolloutSettings};
 use crate::train::dynamic::{FrameData, Reconstruction, Sequence, Settings, SpaceTrainer};
-use crate::train::motion::{one_step, MotionTrainer, Settings as MotionSettings};
+use crate::train::motion::{drive_joints, one_step, MotionTrainer, Settings as MotionSettings};
 use crate::train::{fit, FitOptions, Fitted, Training};
 use anyhow::{bail, Result};
 use serde::Serialize;
@@ -96,6 +96,17 @@ pub struct Args {
     /// With --rollout-fix: the clearance from the body the fix keeps (as `rollout`'s).
     #[arg(long, default_value_t = 2.0)]
     pub collision_margin_mm: f32,
+    /// Stage dynamic (experimental, not in the paper): feed the latent integrator the body
+    /// drive too — the local rotations of the joints that move the garment, their speed, the
+    /// root's velocity and turn. Without it the integrator sees the body only through the
+    /// garment it carries, as in the paper. See docs/dynamic.md for what it measured.
+    #[arg(long)]
+    pub body_drive: bool,
+    /// Stage dynamic, with --body-drive: ridge penalty on the drive's weights, relative to each
+    /// drive input's own mean square (stronger: the drive nudges the integrator instead of
+    /// steering it).
+    #[arg(long, default_value_t = 1.0)]
+    pub drive_ridge: f64,
     /// Stage dynamic: channels of the motion features `E_t`.
     #[arg(long, default_value_t = 16)]
     pub motion_features: usize,
@@ -358,15 +369,25 @@ impl Args {
             "{frames} training frames from {} clip(s); the space stays frozen",
             train.len()
         ));
-        let space_shape = &info.shape;
+        let mut shape = MotionShape::for_space(&info.shape.encoder, self.motion_features);
+        if self.body_drive {
+            shape.drive_joints = drive_joints(&file);
+            let names: Vec<&str> = shape
+                .drive_joints
+                .iter()
+                .map(|&j| file.body.skeleton.joint_names[j].as_str())
+                .collect();
+            say(&format!("body drive: {}", names.join(", ")));
+        }
         let settings = MotionSettings {
-            shape: MotionShape::for_space(&space_shape.encoder, self.motion_features),
+            shape,
             epochs: self.epochs,
             batch: self.batch.unwrap_or(8),
             learning_rate: self.lr.unwrap_or(1e-3),
             seed: self.seed,
             device,
             ridge: self.ridge,
+            drive_ridge: self.drive_ridge,
         };
         let fps = info.fps as f64;
         let mut trainer = MotionTrainer::new(file, data, fps, settings)?;

@@ -97,6 +97,9 @@ pub struct MotionInfo {
     pub frames: usize,
     /// Ridge pull of the fitted linear path towards keeping the previous latent.
     pub ridge: f64,
+    /// Ridge penalty on the body drive's weights (relative to each drive column's square).
+    #[serde(default)]
+    pub drive_ridge: f64,
     /// Per latent dimension, the range of the training frames' latents widened by a tenth on
     /// each side: roll-outs are held inside it (a garment the space never saw is not one it
     /// can decode plausibly).

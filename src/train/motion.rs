@@ -8,7 +8,9 @@
 use super::adam::Adam;
 use super::dynamic::{FrameData, Reconstruction};
 use super::{Blowup, Training};
-use crate::models::dynamic::motion::{motion_inputs, History, MotionInputs, StaticInputs};
+use crate::models::dynamic::motion::{
+    body_drive, motion_inputs, History, MotionInputs, StaticInputs,
+};
 use crate::models::dynamic::{Dynamic, MotionEncoder, MotionShape};
 use crate::models::file::{
     self, KindInfo, ModelFile, MotionEpoch, MotionInfo, MotionTerms, RolloutRound,
@@ -32,6 +34,16 @@ pub struct Settings {
     pub device: Device,
     /// See [`MotionEncoder::init_linear`].
     pub ridge: f64,
+    pub drive_ridge: f64,
+}
+
+/// Share of the garment's skin weight a joint's subtree must carry to drive the integrator.
+const DRIVE_SHARE: f32 = 0.02;
+
+/// The joints whose rotations drive the latent integrator: those that move the garment by its
+/// fixed skin (`ModelFile::lbs`), never a root (skinning carries the global motion).
+pub fn drive_joints(file: &ModelFile) -> Vec<usize> {
+    super::poses::moving_joints(&file.body.skeleton, &file.lbs, DRIVE_SHARE)
 }
 
 /// Each frame's history: the indices of frames `t−1, t−2, t−3`, held at the clip's first frame
@@ -126,6 +138,8 @@ pub struct MotionTrainer {
     /// The frozen space's inputs of every frame's step (teacher-forced), and `Z*` of every frame.
     statics: StaticInputs,
     latents: Tensor,
+    /// The body drive of every predicted frame (`frames`), the same in every round's rows.
+    drives: Tensor,
     /// The linear path's regression rows: teacher-forced ones, then those of each roll-out
     /// round (inputs `[Z^ball, Z^stay]`, `Z_{t−1}`, and the simulated target `Z*_t`).
     rows: Vec<Rows>,
@@ -135,6 +149,7 @@ pub struct MotionTrainer {
 struct Rows {
     inertia: Tensor,
     previous: Tensor,
+    drive: Tensor,
     target: Tensor,
 }
 
@@ -144,6 +159,7 @@ impl Rows {
         Rows {
             inertia: cat(|r| &r.inertia),
             previous: cat(|r| &r.previous),
+            drive: cat(|r| &r.drive),
             target: cat(|r| &r.target),
         }
     }
@@ -180,16 +196,21 @@ impl MotionTrainer {
         let frames = Tensor::from_slice(&predicted_frames(&data)).to_device(device);
         let mut encoder = encoder;
         let fitted = statics.select(&frames);
+        let before = data.body.select(&history[0].index_select(0, &frames));
+        let drives = body_drive(&before, &data.body.select(&frames), &settings.shape, fps);
         let teacher = Rows {
             inertia: fitted.inertia,
             previous: fitted.previous_latent,
+            drive: drives.shallow_clone(),
             target: latents.index_select(0, &frames),
         };
         encoder.init_linear(
             &teacher.inertia,
             &teacher.previous,
+            &teacher.drive,
             &teacher.target,
             settings.ridge,
+            settings.drive_ridge,
         );
         let (lo, hi) = latent_range(&latents);
         let params = encoder.parameters();
@@ -207,6 +228,7 @@ impl MotionTrainer {
             motions: Vec::new(),
             frames: data.len(),
             ridge: settings.ridge,
+            drive_ridge: settings.drive_ridge,
             latent_min: lo,
             latent_max: hi,
             history: Vec::new(),
@@ -235,6 +257,7 @@ impl MotionTrainer {
             frames,
             statics,
             latents,
+            drives,
             rows: vec![teacher],
         })
     }
@@ -273,14 +296,22 @@ impl MotionTrainer {
                 target: self.latents.index_select(0, &self.frames),
                 inertia: inputs.inertia,
                 previous: inputs.previous_latent,
+                drive: self.drives.shallow_clone(),
             });
             let all = Rows::cat(&self.rows);
-            let ridge = self.settings.ridge;
+            let (ridge, drive_ridge) = (self.settings.ridge, self.settings.drive_ridge);
             let Model::Dynamic(d) = &mut self.file.model else {
                 unreachable!("a dynamic trainer holds a dynamic model")
             };
             let encoder = d.motion.as_mut().expect("set in new");
-            encoder.init_linear(&all.inertia, &all.previous, &all.target, ridge);
+            encoder.init_linear(
+                &all.inertia,
+                &all.previous,
+                &all.drive,
+                &all.target,
+                ridge,
+                drive_ridge,
+            );
             done.push(RolloutRound {
                 round: round + 1,
                 rows: all.target.size()[0] as usize,
@@ -323,7 +354,7 @@ impl MotionTrainer {
             inputs: motion_inputs(
                 &self.dynamic().space,
                 &h,
-                self.settings.shape.sigma,
+                &self.settings.shape,
                 Some(self.statics.select(idx)),
             ),
             previous,
@@ -421,7 +452,7 @@ pub fn one_step(dynamic: &Dynamic, data: &FrameData, fps: f64) -> Result<Reconst
     let pred = crate::models::predict_chunks(frames.len(), |s, n| {
         let idx = idx_all.narrow(0, s as i64, n as i64);
         let h = teacher_history(data, &history, &idx, fps);
-        let x = motion_inputs(space, &h, encoder.shape.sigma, None);
+        let x = motion_inputs(space, &h, &encoder.shape, None);
         let z = encoder.latent(&x, Some(&encoder.dynamic_features(space, &x)));
         space.skin(&space.canonical(&z), &h.now.transforms)
     });

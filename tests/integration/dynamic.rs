@@ -279,6 +279,30 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
         "held.safetensors",
         &["--ridge", "1e9", "--rollout-rounds", "0"],
     );
+    // The same pinned integrator with the body drive free: the pose alone moves the latent
+    // (checked to fail with the drive left out of the fit's rows).
+    let (_, driven) = motion_model(
+        &dir,
+        &sim,
+        "driven.safetensors",
+        &[
+            "--ridge",
+            "1e9",
+            "--rollout-rounds",
+            "0",
+            "--body-drive",
+            "--drive-ridge",
+            "1e-3",
+        ],
+    );
+    let (h, d) = (
+        held["train"]["mean_mm"].as_f64().unwrap(),
+        driven["train"]["mean_mm"].as_f64().unwrap(),
+    );
+    assert!(
+        d < 0.5 * h,
+        "one-step error {h:.2} mm held, {d:.2} mm driven by the pose"
+    );
     // Teacher-forced fits: the one-step comparison (the roll-out-aware fit trades one-step
     // accuracy for roll-outs).
     let (model, fitted) = motion_model(

@@ -1,8 +1,10 @@
 //! What the dynamic model needs of the posed body at each frame, as tensors: the seeds'
-//! positions, transforms and normals, and the root joint's rotation.
+//! positions, transforms and normals, the root joint's rotation and position, and every joint's
+//! local rotation (the motion stage's body drive).
 
 use super::seeds::Seeds;
 use crate::body::Body;
+use crate::models::pose_features::{pose_features, PER_JOINT};
 use crate::rig::JointTransform;
 use tch::{Device, Tensor};
 
@@ -16,6 +18,10 @@ pub struct BodyFrames {
     pub normals: Tensor,
     /// The root joint's rotation against the bind pose `[F, 3, 3]`.
     pub root: Tensor,
+    /// The root joint's world position `[F, 3]`.
+    pub origin: Tensor,
+    /// Every joint's local rotation as 6-D features (`pose_features`: rest = 0) `[F, J, 6]`.
+    pub rotations: Tensor,
 }
 
 impl BodyFrames {
@@ -26,6 +32,8 @@ impl BodyFrames {
         device: Device,
     ) -> BodyFrames {
         let (mut b, mut m, mut n, mut r) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let (mut origin, mut rotations) = (Vec::new(), Vec::new());
+        let joints: Vec<usize> = (0..body.skeleton.joint_count()).collect();
         for pose in poses {
             let skinning = body.skeleton.skinning_matrices(pose);
             for (j, t) in seeds.transforms(body, &skinning).iter().enumerate() {
@@ -41,7 +49,12 @@ impl BodyFrames {
             }
             let root = skinning[0];
             r.extend((0..9).map(|k| root[(k / 3, k % 3)]));
+            // Joint 0 is the root (`skinning[0]` above): its local transform is its world one.
+            origin.extend(pose[0].translation.iter().copied());
+            let local: Vec<_> = pose.iter().map(|t| t.rotation).collect();
+            rotations.extend(pose_features(&joints, &local));
         }
+        let j = joints.len() as i64;
         let (f, s) = (poses.len() as i64, seeds.rest.len() as i64);
         let t = |v: Vec<f32>, d: &[i64]| Tensor::from_slice(&v).reshape(d).to_device(device);
         BodyFrames {
@@ -49,6 +62,8 @@ impl BodyFrames {
             transforms: t(m, &[f, s, 12]),
             normals: t(n, &[f, s, 3]),
             root: t(r, &[f, 3, 3]),
+            origin: t(origin, &[f, 3]),
+            rotations: t(rotations, &[f, j, PER_JOINT as i64]),
         }
     }
 
@@ -59,6 +74,8 @@ impl BodyFrames {
             transforms: self.transforms.index_select(0, idx),
             normals: self.normals.index_select(0, idx),
             root: self.root.index_select(0, idx),
+            origin: self.origin.index_select(0, idx),
+            rotations: self.rotations.index_select(0, idx),
         }
     }
 
@@ -72,6 +89,8 @@ impl BodyFrames {
             transforms: all(|p| &p.transforms),
             normals: all(|p| &p.normals),
             root: all(|p| &p.root),
+            origin: all(|p| &p.origin),
+            rotations: all(|p| &p.rotations),
         }
     }
 }

@@ -49,14 +49,14 @@ impl Dynamic {
         let encoder = self.motion()?;
         Ok(if linear_only {
             let (previous, inertia) = motion::StaticInputs::linear(&self.space, h);
-            StepInputs::Linear { previous, inertia }
+            let drive = motion::body_drive(&h.before, &h.now, &encoder.shape, h.fps);
+            StepInputs::Linear {
+                previous,
+                inertia,
+                drive,
+            }
         } else {
-            StepInputs::Full(motion::motion_inputs(
-                &self.space,
-                h,
-                encoder.shape.sigma,
-                None,
-            ))
+            StepInputs::Full(motion::motion_inputs(&self.space, h, &encoder.shape, None))
         })
     }
 
@@ -72,7 +72,11 @@ impl Dynamic {
             StepInputs::Full(x) => {
                 encoder.latent(x, Some(&encoder.dynamic_features(&self.space, x)))
             }
-            StepInputs::Linear { previous, inertia } => encoder.linear_latent(inertia, previous),
+            StepInputs::Linear {
+                previous,
+                inertia,
+                drive,
+            } => encoder.linear_latent(inertia, previous, drive),
         });
         Ok(match range {
             Some((lo, hi)) => z.clamp_tensor(Some(lo), Some(hi)),
@@ -84,10 +88,11 @@ impl Dynamic {
 /// What a roll-out step feeds the motion encoder.
 pub enum StepInputs {
     Full(motion::MotionInputs),
-    /// The linear path's inputs alone: `Z_{t−1}` and `[Z^ball_t, Z^stay_t]`.
+    /// The linear path's inputs alone: `Z_{t−1}`, `[Z^ball_t, Z^stay_t]` and the body drive.
     Linear {
         previous: tch::Tensor,
         inertia: tch::Tensor,
+        drive: tch::Tensor,
     },
 }
 

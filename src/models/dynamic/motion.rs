@@ -21,6 +21,12 @@
 //!   integrator in latent space: inertia, then a learnt pull back towards the body); the residual
 //!   network `ΔE(S(M^P_{t−1}), E_t)` learns what it misses. The virtual sample `E_t = 0` (no relative
 //!   motion) sees `Z^ball = Z^stay = Z_{t−1}`.
+//! - Optional (`train-dynamic --body-drive`, not in the paper): the body drive `u_t` in the
+//!   linear path, `Z_t = W [Z^ball_t, Z^stay_t, Z_{t−1}, 1, u_t]`, with `u_t` the local
+//!   rotations of the joints that move the garment at `t` and their change per second, and the
+//!   root's velocity and turn rate in its own frame. Without it the integrator sees the body
+//!   only through the garment it carries, and a drifted roll-out has nothing to pull it back to
+//!   the pose; the drive is the pose (and its speed) as a static deformation model sees it.
 
 use super::frames::BodyFrames;
 use super::space::Space;
@@ -37,6 +43,10 @@ pub struct MotionShape {
     pub encoder: Vec<usize>,
     /// σ of the interaction weight `a = exp(−|g_{t−1} − b_{t−1}|² / 2σ²)` (metres).
     pub sigma: f32,
+    /// Joints whose rotations drive the linear path (see the module's notes); none: no drive
+    /// (models from before it).
+    #[serde(default)]
+    pub drive_joints: Vec<usize>,
 }
 
 impl MotionShape {
@@ -46,8 +56,46 @@ impl MotionShape {
             features,
             encoder: space_encoder.to_vec(),
             sigma: 0.05,
+            drive_joints: Vec::new(),
         }
     }
+
+    /// Width of the body drive `u_t`: per joint its rotation and their change (6 + 6), then the
+    /// root's velocity (3) and turn (6).
+    pub fn drive_width(&self) -> i64 {
+        match self.drive_joints.len() as i64 {
+            0 => 0,
+            j => 12 * j + 9,
+        }
+    }
+}
+
+/// The body drive `u_t` `[B, D]` from the body at `t − 1` and at `t` (see the module's notes);
+/// `[B, 0]` without drive joints. `body_drive(before, before, ..)` is the drive of a body that
+/// holds still at `t − 1` (the virtual sample).
+pub fn body_drive(before: &BodyFrames, now: &BodyFrames, shape: &MotionShape, fps: f64) -> Tensor {
+    let b = now.root.size()[0];
+    let device = now.root.device();
+    if shape.drive_joints.is_empty() {
+        return Tensor::zeros([b, 0], (Kind::Float, device));
+    }
+    let joints: Vec<i64> = shape.drive_joints.iter().map(|&j| j as i64).collect();
+    let joints = Tensor::from_slice(&joints).to_device(device);
+    let pick = |f: &BodyFrames| f.rotations.index_select(1, &joints).flatten(1, -1);
+    let (was, is) = (pick(before), pick(now));
+    let spin = (&is - was) * fps;
+    // Row vector times R: R^T x, the root's step in its own frame at t.
+    let step = ((&now.origin - &before.origin) * fps)
+        .unsqueeze(1)
+        .bmm(&now.root)
+        .squeeze_dim(1);
+    // R_t^T R_{t−1}: the turn since the last frame, as 6-D features (0 when still).
+    let eye = Tensor::eye(3, (Kind::Float, device)).narrow(1, 0, 2);
+    let turn = (now.root.transpose(1, 2).bmm(&before.root).narrow(2, 0, 2) - eye)
+        .transpose(1, 2)
+        .reshape([b, 6])
+        * fps;
+    Tensor::cat(&[is, spin, step, turn], 1)
 }
 
 /// Per-vertex motion channels: velocity, acceleration and rigid-follow step, 3 each.
@@ -71,6 +119,10 @@ pub struct MotionInputs {
     /// frame at `t` (the `[B, V, N, 3]` product is never built: `C`'s first layer is linear in it).
     pub contact: Tensor,
     pub contact_normals: Tensor,
+    /// The body drive `u_t` `[B, D]`, and that of the body held still at `t − 1` (the virtual
+    /// sample's).
+    pub drive: Tensor,
+    pub drive_still: Tensor,
 }
 
 /// One frame's history and body, batched: garments at `t−1, t−2, t−3` `[B, V, 3]`, the body at
@@ -151,7 +203,7 @@ impl StaticInputs {
 pub fn motion_inputs(
     space: &Space,
     h: &History,
-    sigma: f32,
+    shape: &MotionShape,
     known: Option<StaticInputs>,
 ) -> MotionInputs {
     tch::no_grad(|| {
@@ -172,8 +224,10 @@ pub fn motion_inputs(
             previous_latent: statics.previous_latent,
             inertia: statics.inertia,
             motion,
-            contact: contact_sizes(g1, h, sigma),
+            contact: contact_sizes(g1, h, shape.sigma),
             contact_normals: h.now.normals.bmm(&h.now.root),
+            drive: body_drive(&h.before, &h.now, shape, h.fps),
+            drive_still: body_drive(&h.before, &h.before, shape, h.fps),
         }
     })
 }
@@ -211,7 +265,7 @@ pub struct MotionEncoder {
     c: nn::Sequential,
     encoder: nn::Sequential,
     encoder_fc: nn::Linear,
-    /// The linear path `W` `[L, 3L + 1]` (see the module's notes).
+    /// The linear path `W` `[L, 3L + 1 + D]` (see the module's notes).
     linear: Tensor,
 }
 
@@ -267,7 +321,8 @@ impl MotionEncoder {
         );
         let l = space.shape.latent as i64;
         // Starts as "keep the previous latent" until fitted (`init_linear`).
-        let linear = root.var("linear", &[l, 3 * l + 1], nn::Init::Const(0.0));
+        let width = 3 * l + 1 + shape.drive_width();
+        let linear = root.var("linear", &[l, width], nn::Init::Const(0.0));
         tch::no_grad(|| {
             linear
                 .narrow(1, 2 * l, l)
@@ -307,29 +362,31 @@ impl MotionEncoder {
         self.c.forward(&first)
     }
 
-    /// `Z_t = W [Z^ball_t, Z^stay_t, Z_{t−1}, 1] + ΔE(S(M^P_{t−1}), E_t)`; `e = None` is the
-    /// virtual sample `E_t = 0` (no relative motion: `Z^ball = Z^stay = Z_{t−1}`).
+    /// `Z_t = W [Z^ball_t, Z^stay_t, Z_{t−1}, 1, u_t] + ΔE(S(M^P_{t−1}), E_t)`; `e = None` is the
+    /// virtual sample `E_t = 0` (no relative motion: `Z^ball = Z^stay = Z_{t−1}`, the body
+    /// still at `t − 1`).
     pub fn latent(&self, x: &MotionInputs, e: Option<&Tensor>) -> Tensor {
         let s = x.static_features.size();
         let zeros;
-        let (e, inertia) = match e {
-            Some(e) => (e, x.inertia.shallow_clone()),
+        let (e, inertia, drive) = match e {
+            Some(e) => (e, x.inertia.shallow_clone(), &x.drive),
             None => {
                 zeros = Tensor::zeros(
                     [s[0], self.shape.features as i64, s[2], s[3]],
                     (Kind::Float, x.static_features.device()),
                 );
-                (&zeros, x.previous_latent.repeat([1, 2]))
+                (&zeros, x.previous_latent.repeat([1, 2]), &x.drive_still)
             }
         };
         let input = Tensor::cat(&[x.static_features.shallow_clone(), e.shallow_clone()], 1);
         let h = self.encoder.forward(&input).flatten(1, -1);
-        self.linear_latent(&inertia, &x.previous_latent) + self.encoder_fc.forward(&h)
+        self.linear_latent(&inertia, &x.previous_latent, drive) + self.encoder_fc.forward(&h)
     }
 
-    /// `W [Z^ball_t, Z^stay_t, Z_{t−1}, 1]`: the whole latent when [`MotionEncoder::residual_idle`].
-    pub fn linear_latent(&self, inertia: &Tensor, previous: &Tensor) -> Tensor {
-        Self::linear_input(inertia, previous).matmul(&self.linear.tr())
+    /// `W [Z^ball_t, Z^stay_t, Z_{t−1}, 1, u_t]`: the whole latent when
+    /// [`MotionEncoder::residual_idle`].
+    pub fn linear_latent(&self, inertia: &Tensor, previous: &Tensor, drive: &Tensor) -> Tensor {
+        Self::linear_input(inertia, previous, drive).matmul(&self.linear.tr())
     }
 
     /// Whether the residual `ΔE` adds nothing (its output layer is zero: `--epochs 0`).
@@ -343,35 +400,53 @@ impl MotionEncoder {
         )
     }
 
-    /// `[Z^ball, Z^stay, Z_{t−1}, 1]` `[B, 3L + 1]`.
-    fn linear_input(inertia: &Tensor, previous: &Tensor) -> Tensor {
+    /// `[Z^ball, Z^stay, Z_{t−1}, 1, u_t]` `[B, 3L + 1 + D]`.
+    fn linear_input(inertia: &Tensor, previous: &Tensor, drive: &Tensor) -> Tensor {
         let ones = previous.ones_like().narrow(1, 0, 1);
         Tensor::cat(
-            &[inertia.shallow_clone(), previous.shallow_clone(), ones],
+            &[
+                inertia.shallow_clone(),
+                previous.shallow_clone(),
+                ones,
+                drive.shallow_clone(),
+            ],
             1,
         )
     }
 
     /// Fits the linear path to frames' inputs and their simulated latents `target [F, L]` by
-    /// ridge regression towards "keep the previous latent" (its starting value): the penalty is
-    /// `ridge` times the inputs' mean square. A stronger pull trades one-step accuracy for a
-    /// roll-out that does not amplify its own errors.
+    /// ridge regression towards "keep the previous latent" (its starting value): the penalty on
+    /// the latent columns is `ridge` times their mean square, on each drive column
+    /// `drive_ridge` times its own (the drive's units differ: radians, m/s). A stronger pull
+    /// trades one-step accuracy for a roll-out that does not amplify its own errors.
     pub fn init_linear(
         &mut self,
         inertia: &Tensor,
         previous: &Tensor,
+        drive: &Tensor,
         target: &Tensor,
         ridge: f64,
+        drive_ridge: f64,
     ) {
         tch::no_grad(|| {
-            let x = Self::linear_input(inertia, previous).to_kind(Kind::Double);
-            let n = x.size()[1];
+            let x = Self::linear_input(inertia, previous, drive).to_kind(Kind::Double);
             let gram = x.tr().matmul(&x);
-            let penalty = gram.diagonal(0, 0, 1).mean(Kind::Double) * ridge;
-            let eye = Tensor::eye(n, (Kind::Double, x.device()));
+            let diagonal = gram.diagonal(0, 0, 1);
+            let own = 3 * previous.size()[1] + 1;
+            let latent_mean = diagonal.narrow(0, 0, own).mean(Kind::Double);
+            // A joint the clips never turn about an axis gives a zero column: a floor keeps
+            // the system solvable (its weight stays at zero).
+            let drive_columns = diagonal
+                .narrow(0, own, drive.size()[1])
+                .maximum(&(&latent_mean * 1e-6))
+                * drive_ridge;
+            let penalty = Tensor::cat(
+                &[latent_mean.expand([own], false) * ridge, drive_columns],
+                0,
+            );
             let keep = self.linear.tr().to_kind(Kind::Double);
-            let rhs = x.tr().matmul(&target.to_kind(Kind::Double)) + &keep * &penalty;
-            let w = Tensor::linalg_solve(&(gram + eye * penalty), &rhs, true);
+            let rhs = x.tr().matmul(&target.to_kind(Kind::Double)) + &keep * penalty.unsqueeze(1);
+            let w = Tensor::linalg_solve(&(gram + penalty.diag(0)), &rhs, true);
             self.linear.copy_(&w.tr().to_kind(Kind::Float));
         });
     }
@@ -403,6 +478,8 @@ mod tests {
             transforms: random(&[bs, n, 12]),
             normals: random(&[bs, n, 3]),
             root: random(&[bs, 3, 3]),
+            origin: random(&[bs, 3]),
+            rotations: random(&[bs, 4, 6]),
         }
     }
 
@@ -423,7 +500,9 @@ mod tests {
         };
         let sigma = 0.2;
         let encoder = MotionEncoder::new(MotionShape::for_space(&[4, 4], 4), &space, Device::Cpu);
-        let x = motion_inputs(&space, &h, sigma, None);
+        let mut shape = MotionShape::for_space(&[4, 4], 4);
+        shape.sigma = sigma;
+        let x = motion_inputs(&space, &h, &shape, None);
         // The paper's forces, built in full: a_ij · ReLU(−q_ij) · n_j, in the root frame.
         let g1 = &h.garment[0];
         let q = ((g1.unsqueeze(2) - h.now.seeds.unsqueeze(1)) * h.now.normals.unsqueeze(1))
@@ -457,6 +536,81 @@ mod tests {
         assert!(
             error < 1e-5 * scale,
             "factored {error} vs dense scale {scale}"
+        );
+    }
+
+    /// A rotation about the vertical (Y) axis `[3, 3]`.
+    fn yaw(angle: f64) -> Tensor {
+        let (c, s) = (angle.cos() as f32, angle.sin() as f32);
+        Tensor::from_slice(&[c, 0.0, s, 0.0, 1.0, 0.0, -s, 0.0, c]).reshape([3, 3])
+    }
+
+    #[test]
+    fn the_body_drive_is_the_motion_in_the_roots_frame_and_zero_for_a_still_body() {
+        let mut shape = MotionShape::for_space(&[4], 4);
+        shape.drive_joints = vec![1, 3];
+        let fps = 30.0;
+        tch::manual_seed(9);
+        let mut before = frames(1, 2);
+        let mut now = frames(1, 2);
+        // The root turns by 0.1 rad and steps 1 cm along its own x between the frames.
+        before.root = yaw(0.3).unsqueeze(0);
+        now.root = yaw(0.4).unsqueeze(0);
+        before.origin = Tensor::from_slice(&[0.5f32, 1.0, -0.2]).unsqueeze(0);
+        now.origin = &before.origin + now.root.select(2, 0) * 0.01;
+        let u = body_drive(&before, &now, &shape, fps);
+        assert_eq!(u.size(), [1, shape.drive_width()]);
+        let step: Vec<f32> = u.narrow(1, 24, 3).reshape([-1]).try_into().unwrap();
+        let expected = [0.3f32, 0.0, 0.0];
+        for (a, b) in step.iter().zip(expected) {
+            assert!((a - b).abs() < 1e-5, "step {step:?} vs {expected:?}");
+        }
+        let turn = u.narrow(1, 27, 6).abs().max().double_value(&[]);
+        assert!(
+            (turn - 0.1 * fps).abs() < 0.05 * fps,
+            "turn {turn} per second"
+        );
+        // Turning the whole motion about the vertical leaves it unchanged.
+        let (mut b2, mut n2) = (
+            before.select(&Tensor::from_slice(&[0i64])),
+            now.select(&Tensor::from_slice(&[0i64])),
+        );
+        let r = yaw(1.3);
+        b2.root = r.matmul(&before.root);
+        n2.root = r.matmul(&now.root);
+        b2.origin = before.origin.matmul(&r.tr());
+        n2.origin = now.origin.matmul(&r.tr());
+        let moved = (body_drive(&b2, &n2, &shape, fps) - &u)
+            .abs()
+            .max()
+            .double_value(&[]);
+        assert!(
+            moved < 1e-4,
+            "the drive changed by {moved} when the world turned"
+        );
+        // A body holding still: its rotations, and no motion at all.
+        let still = body_drive(&before, &before, &shape, fps);
+        let motion = still
+            .narrow(1, 12, shape.drive_width() - 12)
+            .abs()
+            .max()
+            .double_value(&[]);
+        assert!(motion < 1e-4, "a still body moves by {motion}");
+        let pose = before
+            .rotations
+            .index_select(1, &Tensor::from_slice(&[1i64, 3]))
+            .reshape([1, 12]);
+        assert!(
+            (still.narrow(1, 0, 12) - pose)
+                .abs()
+                .max()
+                .double_value(&[])
+                < 1e-7
+        );
+        // No drive joints: no drive.
+        assert_eq!(
+            body_drive(&before, &now, &MotionShape::for_space(&[4], 4), fps).size(),
+            [1, 0]
         );
     }
 }
