@@ -60,7 +60,13 @@ pub enum Init {
     Rest,
     /// This garment as frame 0 (e.g. a simulation's first frame), at rest.
     Garment(Vec<[f32; 3]>),
+    /// A garment already moving: its last frames, oldest first, the last one as frame 0 (the
+    /// model reads up to three: velocity and acceleration come from them).
+    Moving(Vec<Vec<[f32; 3]>>),
 }
+
+/// Frames of history the motion encoder reads (the garment, its velocity and acceleration).
+const HISTORY: usize = 3;
 
 /// Milliseconds per phase of one frame, split as the paper does.
 #[derive(Clone, Copy, Debug, Default, Serialize)]
@@ -138,11 +144,15 @@ pub fn roll_out(
     }
     let bodies = BodyFrames::new(body, seeds, poses, device);
     let at = |f: usize| bodies.select(&Tensor::from_slice(&[f as i64]).to_device(device));
-    let first = match init {
-        Init::Rest => tch::no_grad(|| {
+    let start: Vec<Vec<[f32; 3]>> = match init {
+        Init::Rest => vec![tch::no_grad(|| {
             to_points(&space.skin(&space.consts.rest.unsqueeze(0), &at(0).transforms))
-        }),
-        Init::Garment(g) => g.clone(),
+        })],
+        Init::Garment(g) => vec![g.clone()],
+        Init::Moving(frames) => frames[frames.len().saturating_sub(HISTORY)..].to_vec(),
+    };
+    let Some(first) = start.last().cloned() else {
+        bail!("the roll-out's start has no garment");
     };
     let laplacian = MeshLaplacian::new(triangles, first.len(), device);
     let range = settings.latent_range.as_ref().map(|(lo, hi)| {
@@ -155,7 +165,7 @@ pub fn roll_out(
         collision_before: vec![0.0],
         collision_after: vec![0.0],
     };
-    let mut history: Vec<Tensor> = vec![to_tensor(&out.frames[0], device)];
+    let mut history: Vec<Tensor> = start.iter().map(|g| to_tensor(g, device)).collect();
     progress(0);
     for (t, pose) in poses.iter().enumerate().skip(1) {
         let mut timing = FrameTiming::default();
@@ -198,7 +208,7 @@ pub fn roll_out(
             bail!("the roll-out produced a non-finite vertex at frame {t}");
         }
         history.push(resolved);
-        if history.len() > 3 {
+        if history.len() > HISTORY {
             drop(history.remove(0));
         }
         out.frames.push(points);

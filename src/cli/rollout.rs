@@ -73,6 +73,15 @@ pub struct Args {
     /// LBS beside it).
     #[arg(long)]
     pub reference: Option<PathBuf>,
+    /// With --reference: also roll the model out afresh every N frames of the clip, each time
+    /// from the reference's own state there (its last three frames: the garment starts moving
+    /// as simulated), for N frames, and report the mean error of these restarts. A long
+    /// roll-out of a loose garment leaves any one simulation by chaos alone (two simulations of
+    /// a clip whose lead-ins differ by 0.1 s can end centimetres apart); the restarts measure the
+    /// model's dynamics over N frames at every part of the clip instead (the paper's
+    /// "rollout-50", taken all along the clip).
+    #[arg(long, value_name = "N", requires = "reference")]
+    pub restart_every: Option<usize>,
     /// Also write plain linear blend skinning of the rest garment (the fixed skin of the glTF
     /// output: proximity weights, no dynamics) per frame as a point cache, the baseline to
     /// compare with (e.g. `preview --side-by-side`).
@@ -110,6 +119,29 @@ pub struct Versus {
     pub clip_mm: f64,
     pub max_mm: f64,
     pub worst_frame: usize,
+}
+
+/// Roll-outs restarted from the reference every `frames` frames, `frames` long.
+#[derive(Clone, Debug, Serialize)]
+pub struct Restarts {
+    pub frames: usize,
+    /// Each restart's first frame (of the clip) and its error against the reference.
+    pub each: Vec<(usize, Versus)>,
+    /// Means over the restarts: after one step, and over each restart's frames.
+    pub one_step_mm: f64,
+    pub mean_mm: f64,
+}
+
+impl Restarts {
+    fn of(frames: usize, each: Vec<(usize, Versus)>) -> Restarts {
+        let n = each.len().max(1) as f64;
+        Restarts {
+            frames,
+            one_step_mm: each.iter().map(|e| e.1.one_step_mm).sum::<f64>() / n,
+            mean_mm: each.iter().map(|e| e.1.clip_mm).sum::<f64>() / n,
+            each,
+        }
+    }
 }
 
 /// Mean milliseconds per frame of each phase.
@@ -173,6 +205,8 @@ pub struct Report {
     /// The same per 100 frames: whether a long roll-out drifts or blows up.
     pub windows: Vec<Window>,
     pub reference: Option<Versus>,
+    /// With --restart-every: the model restarted from the reference along the clip.
+    pub restarts: Option<Restarts>,
     /// Plain LBS of the rest garment against the same reference.
     pub lbs_reference: Option<Versus>,
     pub lbs_out: Option<PathBuf>,
@@ -226,6 +260,7 @@ impl Execute for Args {
             .map(|m| Ok(load_clip(m, &maps, skeleton, Some(fps))?.animation))
             .collect::<Result<Vec<_>>>()?;
         let mut poses = chain(&clips.iter().collect::<Vec<_>>(), self.fade);
+        let clip_frames = poses.len();
         poses.truncate(self.frames.unwrap_or(poses.len()).max(1));
         let n = file.garment.vertex_count();
         let init = match self.init.as_str() {
@@ -243,19 +278,28 @@ impl Execute for Args {
                 if self.motions.len() != 1 {
                     bail!("--reference measures a single clip: give one --motion");
                 }
-                let frames = read_pc2(path, n)?;
-                if frames.len() != poses.len() {
+                // The reference covers the clip, or the frames played (--frames).
+                let mut frames = read_pc2(path, n)?;
+                if frames.len() != clip_frames && frames.len() != poses.len() {
                     bail!(
-                        "{}: {} frames, the clip has {} at {fps} fps (simulated at another rate?)",
+                        "{}: {} frames, the clip has {clip_frames} at {fps} fps (simulated at another rate?)",
                         path.display(),
                         frames.len(),
-                        poses.len()
                     );
                 }
+                frames.truncate(poses.len());
                 Some(frames)
             }
             None => None,
         };
+        if let (Some(every), Some(r)) = (self.restart_every, &reference) {
+            if every == 0 || every >= r.len() {
+                bail!(
+                    "--restart-every {every}: give a number of frames from 1 to {} (the clip's frames − 1)",
+                    r.len() - 1
+                );
+            }
+        }
         let settings = Settings {
             collision_fix: !self.no_collision_fix,
             iterations: self.collision_iterations,
@@ -267,10 +311,21 @@ impl Execute for Args {
         ));
         let bar = crate::progress::bar(poses.len() as u64, "roll-out", self.output.json);
         let collision_fix = settings.collision_fix;
-        let rollout = for_model(&file, &poses, &init, settings, &mut |f| {
+        let rollout = for_model(&file, &poses, &init, settings.clone(), &mut |f| {
             bar.set_position(f as u64 + 1)
         })?;
         bar.finish_and_clear();
+        let restarts = match (self.restart_every, &reference) {
+            (Some(every), Some(r)) => Some(restarts(
+                &file,
+                &poses,
+                r,
+                every,
+                &settings,
+                self.output.json,
+            )?),
+            _ => None,
+        };
         let (per_frame, summary) = stats::of(
             &Series::unpinned(&file.body, &file.garment, fps),
             &rollout.frames,
@@ -357,6 +412,7 @@ impl Execute for Args {
                 .map(|(r, l)| versus(l, r)),
             lbs_out: self.lbs_out.clone(),
             reference: reference.map(|r| versus(&rollout.frames, &r)),
+            restarts,
             out: self.out.clone(),
             out_bytes: std::fs::metadata(&self.out).map_or(0, |m| m.len()),
             baked,
@@ -406,6 +462,16 @@ impl Execute for Args {
             println!(
                 "vs reference (vertex L2): after 1 step {:.2} mm, first 50 frames {:.2} mm, whole clip {:.2} mm, max {:.1} mm (frame {})",
                 v.one_step_mm, v.first_50_mm, v.clip_mm, v.max_mm, v.worst_frame
+            );
+        }
+        if let Some(s) = &r.restarts {
+            println!(
+                "restarted from the reference every {} frames ({} restarts, {} frames each): after 1 step {:.2} mm, over the restarts {:.2} mm",
+                s.frames,
+                s.each.len(),
+                s.frames,
+                s.one_step_mm,
+                s.mean_mm
             );
         }
         if let Some(v) = &r.lbs_reference {
@@ -520,6 +586,37 @@ pub(crate) fn timing(frames: &[FrameTiming]) -> Timing {
 
 /// Mean vertex distances of the roll-out to the reference: frame 1 (the first prediction),
 /// frames 1–50, every predicted frame.
+/// The model rolled out for `every` frames from the reference's state at frames 0, `every`,
+/// 2·`every`, … (whole restarts only), each measured against the reference.
+fn restarts(
+    file: &crate::models::file::ModelFile,
+    poses: &[Vec<crate::rig::JointTransform>],
+    reference: &[Vec<[f32; 3]>],
+    every: usize,
+    settings: &Settings,
+    quiet: bool,
+) -> Result<Restarts> {
+    let starts: Vec<usize> = (0..reference.len().saturating_sub(every))
+        .step_by(every)
+        .collect();
+    let bar = crate::progress::bar((starts.len() * every) as u64, "restarts", quiet);
+    let mut each = Vec::with_capacity(starts.len());
+    for (k, &start) in starts.iter().enumerate() {
+        let span = start..=start + every;
+        let init = Init::Moving(reference[start.saturating_sub(2)..=start].to_vec());
+        let rollout = for_model(
+            file,
+            &poses[span.clone()],
+            &init,
+            settings.clone(),
+            &mut |f| bar.set_position((k * every + f) as u64),
+        )?;
+        each.push((start, versus(&rollout.frames, &reference[span])));
+    }
+    bar.finish_and_clear();
+    Ok(Restarts::of(every, each))
+}
+
 fn versus(frames: &[Vec<[f32; 3]>], reference: &[Vec<[f32; 3]>]) -> Versus {
     let per_frame: Vec<(f64, f64)> = frames
         .iter()

@@ -65,6 +65,12 @@ pub struct Args {
     /// principal components of the training frames.
     #[arg(long)]
     pub latent: Option<usize>,
+    /// Stage space: initial kernel radius of the seed skinning (mm, every body part; learnt
+    /// from there). Small: each garment vertex follows its nearest few seeds (a skirt's hem
+    /// follows the thighs); large: it blends the seeds over a wider patch (the hem moves with
+    /// the hips and both legs at once).
+    #[arg(long, default_value_t = 50.0)]
+    pub kernel_radius_mm: f64,
     /// Fabric the simulations used (recorded in the model).
     #[arg(long, default_value = "cotton")]
     pub config: String,
@@ -296,6 +302,7 @@ impl Args {
         shape.latent = self.latent.unwrap_or(shape.latent);
         let mut settings = Settings::new(shape);
         settings.epochs = self.epochs;
+        settings.kernel_radius = self.kernel_radius_mm / 1000.0;
         settings.batch = self.batch.unwrap_or(settings.batch);
         settings.learning_rate = self.lr.unwrap_or(settings.learning_rate);
         settings.seed = self.seed;

@@ -54,6 +54,8 @@ pub struct Settings {
     pub device: Device,
     /// Seeds are sampled on the body within this distance of the garment at rest (metres).
     pub seed_reach: f32,
+    /// Initial kernel radius of the seed skinning, every part (metres).
+    pub kernel_radius: f64,
     /// Random latents decoded per step for `L_rand` and `L_SDF`.
     pub random: usize,
     /// ε of the SDF hinge (metres).
@@ -78,6 +80,7 @@ impl Settings {
             seed: 0,
             device: Device::Cpu,
             seed_reach: 0.25,
+            kernel_radius: crate::models::dynamic::space::RADIUS0,
             random: 2,
             sdf_margin: 0.003,
         }
@@ -300,6 +303,7 @@ impl SpaceTrainer {
         )?;
         let consts = Consts::new(&garment.mesh, &raster, &seeds, device);
         let mut space = Space::new(settings.shape.clone(), consts, device)?;
+        space.set_radius(settings.kernel_radius)?;
         let data = FrameData::new(&body, &seeds, sequences, device);
         space.init_linear(&tch::no_grad(|| {
             crate::models::predict_chunks(data.len(), |s, n| {

@@ -89,6 +89,22 @@ fn the_space_learns_is_deterministic_and_resumes_exactly() {
         exact_mm < 0.05,
         "untrained 64-d space: {exact_mm:.3} mm off its own frames"
     );
+    // --kernel-radius-mm sets the seed skinning's starting radius, and unskinning still inverts
+    // skinning at it.
+    let wide = train(
+        &sim,
+        &dir.join("w0.safetensors"),
+        "0",
+        &["--kernel-radius-mm", "120"],
+    );
+    let radii: Vec<f64> = wide["radius_mm"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p[1].as_f64().unwrap())
+        .collect();
+    assert!(radii.iter().all(|r| (r - 120.0).abs() < 1e-3), "{radii:?}");
+    assert!(wide["train"]["max_mm"].as_f64().unwrap() < 0.05, "{wide}");
     // One latent dimension leaves millimetres for the networks to learn.
     let one = ["--latent", "1"];
     let before = train(&sim, &dir.join("l0.safetensors"), "0", &one)["train"]["mean_mm"]
@@ -378,11 +394,32 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
             "--no-collision-fix",
             "--reference",
             sim.to_str().unwrap(),
+            "--restart-every",
+            "2",
             "--view",
             page.to_str().unwrap(),
         ],
     );
     assert_eq!(plain["frames"], 6);
+    // --restart-every 2: roll-outs from the simulation's frames 0 and 2, two frames each, the
+    // garment moving as simulated (its last three frames). The fit interpolates the simulated
+    // histories, so a restart one step on is the teacher-forced step (checked to fail when the
+    // restart starts from the frame at rest: 2.2 mm).
+    let restarts = &plain["restarts"];
+    let starts: Vec<u64> = restarts["each"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e[0].as_u64().unwrap())
+        .collect();
+    assert_eq!(
+        (starts, &restarts["frames"]),
+        (vec![0, 2], &2.into()),
+        "{restarts}"
+    );
+    let late = restarts["each"][1][1]["one_step_mm"].as_f64().unwrap();
+    eprintln!("restart at frame 2, one step: {late:.4} mm (teacher-forced mean {f:.4} mm)");
+    assert!(late < 0.05, "{restarts}");
     let windows = plain["windows"].as_array().unwrap();
     assert_eq!((windows.len(), &windows[0]["last_frame"]), (1, &5.into()));
     // --view: the roll-out and the simulation (the reference, inlined once) in one page.
@@ -570,6 +607,14 @@ fn rollout_refuses_a_space_only_model_and_a_cache_of_another_mesh() {
     let err = fails_with(&model, "rest", &never, &["--with-body"]);
     assert!(
         err.contains("--with-body") && err.contains(".usdc"),
+        "{err}"
+    );
+    // Restarts longer than the six frames played.
+    let s = sim.to_str().unwrap();
+    let extra = ["--frames", "6", "--reference", s, "--restart-every", "6"];
+    let err = fails_with(&model, s, &dir.join("never.pc2"), &extra);
+    assert!(
+        err.contains("--restart-every 6") && err.contains("1 to 5"),
         "{err}"
     );
 }

@@ -194,7 +194,7 @@ pub struct Space {
 
 /// Initial kernel radius (metres): under the seed spacing (~6 cm for the cpu preset on the skirt), so
 /// each vertex starts on its few nearest seeds (the waist band then follows the hips within 2 cm).
-const RADIUS0: f64 = 0.05;
+pub const RADIUS0: f64 = 0.05;
 /// `R`'s output scale: displacements start at millimetres.
 const DISPLACEMENT_SCALE: f64 = 0.05;
 /// A principal component whose spread is under this fraction of the largest is rank noise.
@@ -586,6 +586,15 @@ impl Space {
         let z = self.encode(g, b, m);
         let canonical = self.canonical(&z);
         (self.skin(&canonical, m), z, canonical)
+    }
+
+    /// Sets every part's kernel radius (metres), before training.
+    pub fn set_radius(&mut self, radius: f64) -> Result<()> {
+        if !(radius.is_finite() && radius > 0.0) {
+            bail!("the kernel radius must be a positive length, not {radius} m");
+        }
+        let _ = tch::no_grad(|| self.log_radius.fill_(radius.ln()));
+        Ok(())
     }
 
     /// The learnt kernel radius per body part (metres).
