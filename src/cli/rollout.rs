@@ -130,16 +130,24 @@ pub struct Restarts {
     /// Means over the restarts: after one step, and over each restart's frames.
     pub one_step_mm: f64,
     pub mean_mm: f64,
+    /// The mean error `k` frames after a restart, k = 1 … `frames`: how fast the model leaves
+    /// the simulated state.
+    pub by_step_mm: Vec<f64>,
 }
 
 impl Restarts {
-    fn of(frames: usize, each: Vec<(usize, Versus)>) -> Restarts {
+    /// From each restart's first frame, its error and its error per frame (frame 0 first).
+    fn of(frames: usize, each: Vec<(usize, Versus, Vec<f64>)>) -> Restarts {
         let n = each.len().max(1) as f64;
+        let by_step_mm = (1..=frames)
+            .map(|k| each.iter().map(|e| e.2[k]).sum::<f64>() / n)
+            .collect();
         Restarts {
             frames,
             one_step_mm: each.iter().map(|e| e.1.one_step_mm).sum::<f64>() / n,
             mean_mm: each.iter().map(|e| e.1.clip_mm).sum::<f64>() / n,
-            each,
+            by_step_mm,
+            each: each.into_iter().map(|(start, v, _)| (start, v)).collect(),
         }
     }
 }
@@ -473,6 +481,14 @@ impl Execute for Args {
                 s.one_step_mm,
                 s.mean_mm
             );
+            let steps: Vec<String> = [1, 2, 5, 10, 25, 50, 100]
+                .iter()
+                .filter_map(|&k| Some(format!("{k}: {:.1}", s.by_step_mm.get(k - 1)?)))
+                .collect();
+            println!(
+                "  mean error k frames after a restart (mm): {}",
+                steps.join(", ")
+            );
         }
         if let Some(v) = &r.lbs_reference {
             println!(
@@ -611,10 +627,23 @@ fn restarts(
             settings.clone(),
             &mut |f| bar.set_position((k * every + f) as u64),
         )?;
-        each.push((start, versus(&rollout.frames, &reference[span])));
+        let per_frame = mean_distances_mm(&rollout.frames, &reference[span.clone()]);
+        each.push((start, versus(&rollout.frames, &reference[span]), per_frame));
     }
     bar.finish_and_clear();
     Ok(Restarts::of(every, each))
+}
+
+/// Mean vertex distance (mm) of each frame to the reference's.
+fn mean_distances_mm(frames: &[Vec<[f32; 3]>], reference: &[Vec<[f32; 3]>]) -> Vec<f64> {
+    frames
+        .iter()
+        .zip(reference)
+        .map(|(a, b)| {
+            let d = crate::metrics::vertex_distances_mm(a, b);
+            d.iter().sum::<f64>() / d.len().max(1) as f64
+        })
+        .collect()
 }
 
 fn versus(frames: &[Vec<[f32; 3]>], reference: &[Vec<[f32; 3]>]) -> Versus {

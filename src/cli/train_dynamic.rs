@@ -13,7 +13,9 @@ use crate::motion::{load_clip, read_maps};
 use crate::rig::Skeleton;
 use crate::rollout::{for_model, Init, Settings as RolloutSettings};
 use crate::train::dynamic::{FrameData, Reconstruction, Sequence, Settings, SpaceTrainer};
-use crate::train::motion::{drive_joints, one_step, MotionTrainer, Settings as MotionSettings};
+use crate::train::motion::{
+    drive_joints, one_step, MotionTrainer, Rolled, Settings as MotionSettings,
+};
 use crate::train::{fit, FitOptions, Fitted, Training};
 use anyhow::{bail, Result};
 use serde::Serialize;
@@ -99,6 +101,13 @@ pub struct Args {
     /// makes a round ~3× slower).
     #[arg(long)]
     pub rollout_fix: bool,
+    /// Stage dynamic: the rounds' roll-outs restart every N frames from the simulation's
+    /// moving state there, instead of running each whole clip from its first frame: the
+    /// integrator is then refitted on histories that drifted for up to N frames (the states it
+    /// meets near the simulation) rather than on ones far from any simulated state. 0: whole
+    /// clips.
+    #[arg(long, default_value_t = 0, value_name = "N")]
+    pub rollout_window: usize,
     /// With --rollout-fix: the clearance from the body the fix keeps (as `rollout`'s).
     #[arg(long, default_value_t = 2.0)]
     pub collision_margin_mm: f32,
@@ -420,9 +429,11 @@ impl Args {
                     &trainer.file,
                     std::slice::from_ref(&s),
                     None,
+                    None,
                     device,
                     &mut |f| bar.set_position(f as u64),
-                )?;
+                )?
+                .garments;
                 bar.finish_and_clear();
                 // Frame 0 is the simulation's: the predicted frames follow.
                 let n = data.len() as i64 - 1;
@@ -462,7 +473,8 @@ impl Args {
         );
         let rounds = trainer.fit_on_rollouts(self.rollout_rounds, &mut |file, round| {
             let fix = self.rollout_fix.then_some(self.collision_margin_mm * 1e-3);
-            roll_clips(file, train, fix, device, &mut |f| {
+            let window = (self.rollout_window > 0).then_some(self.rollout_window);
+            roll_clips(file, train, fix, window, device, &mut |f| {
                 bar.set_position(round as u64 * frames + f as u64)
             })
         })?;
@@ -508,17 +520,18 @@ impl Args {
     }
 }
 
-/// Every frame of `clips` as the model in `file` plays them (`rollout::roll_out`, latents
-/// held in the training range) from each clip's first simulated frame, `[F, V, 3]` in the
-/// clips' order; with `fix`, through the collision fix keeping that clearance (metres); `done`
-/// gets the frames so far.
+/// The model rolled out over `clips` as a round of the roll-out-aware fit sees it (latents held
+/// in the training range; the collision fix only with `fix`, the clearance in metres): from each
+/// clip's first simulated frame, or with `window`, restarted every that many frames from the
+/// simulation's moving state there (its last three frames). `done` gets the frames so far.
 fn roll_clips(
     file: &ModelFile,
     clips: &[Sequence],
     fix: Option<f32>,
+    window: Option<usize>,
     device: tch::Device,
     done: &mut dyn FnMut(usize),
-) -> Result<tch::Tensor> {
+) -> Result<Rolled> {
     let defaults = RolloutSettings::default();
     let settings = RolloutSettings {
         collision_fix: fix.is_some(),
@@ -526,22 +539,45 @@ fn roll_clips(
         measure_collisions: false,
         ..defaults
     };
-    let mut frames: Vec<Vec<[f32; 3]>> = Vec::new();
-    for s in clips {
-        let Some(first) = s.garment.first() else {
-            continue;
-        };
-        let before = frames.len();
-        let init = Init::Garment(first.clone());
-        let rolled = for_model(file, &s.poses(), &init, settings.clone(), &mut |f| {
-            done(before + f)
-        })?;
-        frames.extend(rolled.frames);
+    let mut garments: Vec<Vec<[f32; 3]>> = Vec::new();
+    let (mut predicted, mut back) = (Vec::new(), [Vec::new(), Vec::new(), Vec::new()]);
+    let mut played = 0;
+    for s in clips.iter().filter(|s| !s.garment.is_empty()) {
+        let (len, poses) = (s.garment.len(), s.poses());
+        let every = window.unwrap_or(len).max(1);
+        for start in (0..len.max(2) - 1).step_by(every) {
+            let end = (start + every).min(len - 1);
+            // The restart's history: up to three simulated frames, then its predictions.
+            let from = start.saturating_sub(2);
+            let base = garments.len() as i64 - from as i64;
+            let init = Init::Moving(s.garment[from..=start].to_vec());
+            let rolled = for_model(
+                file,
+                &poses[start..=end],
+                &init,
+                settings.clone(),
+                &mut |f| done(played + f),
+            )?;
+            played += end - start;
+            garments.extend_from_slice(&s.garment[from..start]);
+            garments.extend(rolled.frames);
+            for t in start + 1..=end {
+                predicted.push(base + t as i64);
+                for (k, b) in back.iter_mut().enumerate() {
+                    b.push(base + (t - 1).saturating_sub(k).max(from) as i64);
+                }
+            }
+        }
     }
-    let flat: Vec<f32> = frames.iter().flatten().flatten().copied().collect();
-    Ok(tch::Tensor::from_slice(&flat)
-        .reshape([frames.len() as i64, -1, 3])
-        .to_device(device))
+    let flat: Vec<f32> = garments.iter().flatten().flatten().copied().collect();
+    let index = |v: &[i64]| tch::Tensor::from_slice(v).to_device(device);
+    Ok(Rolled {
+        garments: tch::Tensor::from_slice(&flat)
+            .reshape([garments.len() as i64, -1, 3])
+            .to_device(device),
+        predicted: index(&predicted),
+        back: back.map(|b| index(&b)),
+    })
 }
 
 fn radii_mm(info: &crate::models::file::DynamicInfo) -> Vec<(String, f64)> {

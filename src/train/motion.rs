@@ -70,15 +70,33 @@ fn static_inputs(
     history: &[Tensor; 3],
     fps: f64,
 ) -> StaticInputs {
-    let device = data.garment.device();
+    let all = Tensor::arange(data.len() as i64, (Kind::Int64, data.garment.device()));
+    let rolled = Rolled {
+        garments: garments.shallow_clone(),
+        predicted: all.shallow_clone(),
+        back: history.each_ref().map(|h| h.shallow_clone()),
+    };
+    inputs_at(space, data, &rolled, history, &all, fps)
+}
+
+/// The frozen space's inputs of frames `frames` (`rolled`'s entries in the same order), their
+/// garment histories read from `rolled`, in chunks.
+fn inputs_at(
+    space: &crate::models::dynamic::Space,
+    data: &FrameData,
+    rolled: &Rolled,
+    history: &[Tensor; 3],
+    frames: &Tensor,
+    fps: f64,
+) -> StaticInputs {
+    let count = frames.size()[0];
     let mut parts = Vec::new();
-    for start in (0..data.len()).step_by(crate::models::PREDICT_CHUNK) {
-        let n = crate::models::PREDICT_CHUNK.min(data.len() - start);
-        let idx = Tensor::arange_start(start as i64, (start + n) as i64, (Kind::Int64, device));
-        parts.push(StaticInputs::new(
-            space,
-            &history_of(data, garments, history, &idx, fps),
-        ));
+    for start in (0..count).step_by(crate::models::PREDICT_CHUNK) {
+        let n = (crate::models::PREDICT_CHUNK as i64).min(count - start);
+        let idx = frames.narrow(0, start, n);
+        let back = rolled.back.each_ref().map(|b| b.narrow(0, start, n));
+        let h = history_of(data, &rolled.garments, back, history, &idx, fps);
+        parts.push(StaticInputs::new(space, &h));
     }
     let cat =
         |f: fn(&StaticInputs) -> &Tensor| Tensor::cat(&parts.iter().map(f).collect::<Vec<_>>(), 0);
@@ -89,24 +107,36 @@ fn static_inputs(
     }
 }
 
-/// The simulated history of frames `idx` (teacher forcing) and the body around them.
-fn teacher_history(data: &FrameData, history: &[Tensor; 3], idx: &Tensor, fps: f64) -> History {
-    history_of(data, &data.garment, history, idx, fps)
+/// Garments a round of the roll-out-aware fit made, and where each predicted training frame's
+/// own prediction and history lie among them: `predicted[i]` and `back[k][i]` (its garment
+/// `k + 1` frames before) index `garments` for the `i`-th predicted frame of the training data.
+/// A roll-out of whole clips is one garment per frame; roll-outs restarted from the
+/// simulation also hold the simulated frames each restart began from.
+pub struct Rolled {
+    pub garments: Tensor,
+    pub predicted: Tensor,
+    pub back: [Tensor; 3],
 }
 
-/// The history of frames `idx` read from `garments` `[F, V, 3]` (the simulation's frames, or a
-/// roll-out's of the same clips) and the body around them.
+/// The simulated history of frames `idx` (teacher forcing) and the body around them.
+fn teacher_history(data: &FrameData, history: &[Tensor; 3], idx: &Tensor, fps: f64) -> History {
+    let back = history.each_ref().map(|h| h.index_select(0, idx));
+    history_of(data, &data.garment, back, history, idx, fps)
+}
+
+/// The history of frames `idx`: their garments `back[k]` (`k + 1` frames before, indices into
+/// `garments`: the simulation's frames or a roll-out's) and the body around them.
 fn history_of(
     data: &FrameData,
     garments: &Tensor,
+    back: [Tensor; 3],
     history: &[Tensor; 3],
     idx: &Tensor,
     fps: f64,
 ) -> History {
-    let back: Vec<Tensor> = history.iter().map(|h| h.index_select(0, idx)).collect();
     History {
-        garment: std::array::from_fn(|k| garments.index_select(0, &back[k])),
-        before: data.body.select(&back[0]),
+        garment: back.map(|b| garments.index_select(0, &b)),
+        before: data.body.select(&history[0].index_select(0, idx)),
         now: data.body.select(idx),
         fps,
     }
@@ -263,9 +293,9 @@ impl MotionTrainer {
     }
 
     /// Roll-out-aware fit of the linear path ("data as demonstrator", Venkatraman et al. 2015):
-    /// each round `roll`s the model out over every training clip from its first simulated
-    /// frame (the caller decides how: `rollout::roll_out`, with or without the collision fix)
-    /// and returns every frame `[F, V, 3]`, clips in the order of the training data; every
+    /// each round `roll`s the model out over every training clip (the caller decides how:
+    /// `rollout::roll_out` from each clip's first simulated frame or restarted along it, with
+    /// or without the collision fix) and returns what it made ([`Rolled`]); every
     /// predicted frame's inputs (a history the model made itself) join the rows with the
     /// simulated frame's latent as the target, and the linear path is refitted on all rows so
     /// far. The integrator thus learns to pull its own drifted states back, which teacher
@@ -274,24 +304,32 @@ impl MotionTrainer {
     pub fn fit_on_rollouts(
         &mut self,
         rounds: usize,
-        roll: &mut dyn FnMut(&ModelFile, usize) -> Result<Tensor>,
+        roll: &mut dyn FnMut(&ModelFile, usize) -> Result<Rolled>,
     ) -> Result<Vec<RolloutRound>> {
         let mut done = Vec::new();
         for round in 0..rounds {
             let rolled = roll(&self.file, round)?;
-            if rolled.size() != self.data.garment.size() {
+            let frames = self.frames.size()[0];
+            if rolled.predicted.size() != [frames]
+                || rolled.back.iter().any(|b| b.size() != [frames])
+            {
                 bail!(
-                    "a roll-out of {:?} frames for training data of {:?}",
-                    rolled.size(),
-                    self.data.garment.size()
+                    "a roll-out of {:?} predicted frames for training data with {frames}",
+                    rolled.predicted.size()
                 );
             }
-            let predicted = rolled.index_select(0, &self.frames);
+            let predicted = rolled.garments.index_select(0, &rolled.predicted);
             let truth = self.data.garment.index_select(0, &self.frames);
             let error = Reconstruction::of(&predicted, &truth);
             let space = &self.dynamic().space;
-            let inputs = static_inputs(space, &self.data, &rolled, &self.history, self.fps)
-                .select(&self.frames);
+            let inputs = inputs_at(
+                space,
+                &self.data,
+                &rolled,
+                &self.history,
+                &self.frames,
+                self.fps,
+            );
             self.rows.push(Rows {
                 target: self.latents.index_select(0, &self.frames),
                 inertia: inputs.inertia,

@@ -357,6 +357,29 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
     let after = rounds[1]["train_rollout_mean_mm"].as_f64().unwrap();
     eprintln!("roll-out of the training frames: {before:.3} mm teacher-forced fit, {after:.3} mm refitted");
     assert!(after < 0.8 * before, "{before:.3} mm then {after:.3} mm");
+    // --rollout-window 2: the round's roll-outs restart from the simulation every two frames,
+    // so they drift less than the whole clip's (checked to fail with the restarts left out).
+    let (_, windowed) = motion_model(
+        &dir,
+        &sim,
+        "refit_windowed.safetensors",
+        &[
+            "--ridge",
+            "1",
+            "--rollout-rounds",
+            "1",
+            "--rollout-window",
+            "2",
+        ],
+    );
+    let round = &windowed["rollout_rounds"][0];
+    let restarted = round["train_rollout_mean_mm"].as_f64().unwrap();
+    eprintln!("first round restarted every 2 frames: {restarted:.3} mm");
+    assert_eq!(round["rows"], 10, "{round}");
+    assert!(
+        restarted < 0.8 * before,
+        "{restarted:.3} mm, whole clip {before:.3} mm"
+    );
     // --rollout-fix: the rounds roll out through the collision fix (a 30 mm clearance makes it
     // fire on every frame), so the first round's roll-out is not the plain one.
     let (_, fixed) = motion_model(
