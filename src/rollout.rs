@@ -58,10 +58,9 @@ impl Default for Settings {
 pub enum Init {
     /// The rest garment carried to the first pose by the seeds, at rest (zero velocity).
     Rest,
-    /// This garment as frame 0 (e.g. a simulation's first frame), at rest.
-    Garment(Vec<[f32; 3]>),
-    /// A garment already moving: its last frames, oldest first, the last one as frame 0 (the
-    /// model reads up to three: velocity and acceleration come from them).
+    /// A garment's last frames, oldest first, the last one as frame 0 (the model reads up to
+    /// three: velocity and acceleration come from them). One frame: that garment at rest (e.g.
+    /// a simulation's first frame).
     Moving(Vec<Vec<[f32; 3]>>),
 }
 
@@ -148,7 +147,6 @@ pub fn roll_out(
         Init::Rest => vec![tch::no_grad(|| {
             to_points(&space.skin(&space.consts.rest.unsqueeze(0), &at(0).transforms))
         })],
-        Init::Garment(g) => vec![g.clone()],
         Init::Moving(frames) => frames[frames.len().saturating_sub(HISTORY)..].to_vec(),
     };
     let Some(first) = start.last().cloned() else {

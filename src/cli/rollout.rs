@@ -276,7 +276,7 @@ impl Execute for Args {
             path => {
                 let frames = read_pc2(std::path::Path::new(path), n)?;
                 match frames.into_iter().next() {
-                    Some(first) => Init::Garment(first),
+                    Some(first) => Init::Moving(vec![first]),
                     None => bail!("{path}: the --init cache has no frames"),
                 }
             }
@@ -600,8 +600,6 @@ pub(crate) fn timing(frames: &[FrameTiming]) -> Timing {
     }
 }
 
-/// Mean vertex distances of the roll-out to the reference: frame 1 (the first prediction),
-/// frames 1–50, every predicted frame.
 /// The model rolled out for `every` frames from the reference's state at frames 0, `every`,
 /// 2·`every`, … (whole restarts only), each measured against the reference.
 fn restarts(
@@ -627,27 +625,17 @@ fn restarts(
             settings.clone(),
             &mut |f| bar.set_position((k * every + f) as u64),
         )?;
-        let per_frame = mean_distances_mm(&rollout.frames, &reference[span.clone()]);
-        each.push((start, versus(&rollout.frames, &reference[span]), per_frame));
+        let per_frame = distances_mm(&rollout.frames, &reference[span]);
+        let mean = per_frame.iter().map(|d| d.0).collect();
+        each.push((start, Versus::of(&per_frame), mean));
     }
     bar.finish_and_clear();
     Ok(Restarts::of(every, each))
 }
 
-/// Mean vertex distance (mm) of each frame to the reference's.
-fn mean_distances_mm(frames: &[Vec<[f32; 3]>], reference: &[Vec<[f32; 3]>]) -> Vec<f64> {
+/// Mean and largest vertex distance (mm) of each frame to the reference's.
+fn distances_mm(frames: &[Vec<[f32; 3]>], reference: &[Vec<[f32; 3]>]) -> Vec<(f64, f64)> {
     frames
-        .iter()
-        .zip(reference)
-        .map(|(a, b)| {
-            let d = crate::metrics::vertex_distances_mm(a, b);
-            d.iter().sum::<f64>() / d.len().max(1) as f64
-        })
-        .collect()
-}
-
-fn versus(frames: &[Vec<[f32; 3]>], reference: &[Vec<[f32; 3]>]) -> Versus {
-    let per_frame: Vec<(f64, f64)> = frames
         .iter()
         .zip(reference)
         .map(|(a, b)| {
@@ -657,19 +645,31 @@ fn versus(frames: &[Vec<[f32; 3]>], reference: &[Vec<[f32; 3]>]) -> Versus {
                 d.iter().copied().fold(0.0, f64::max),
             )
         })
-        .collect();
-    let mean = |s: &[(f64, f64)]| s.iter().map(|x| x.0).sum::<f64>() / s.len().max(1) as f64;
-    let predicted = &per_frame[1.min(per_frame.len())..];
-    let (worst_frame, max) =
-        per_frame
-            .iter()
-            .enumerate()
-            .fold((0, 0.0), |b, (f, x)| if x.1 > b.1 { (f, x.1) } else { b });
-    Versus {
-        one_step_mm: mean(&predicted[..1.min(predicted.len())]),
-        first_50_mm: mean(&predicted[..50.min(predicted.len())]),
-        clip_mm: mean(predicted),
-        max_mm: max,
-        worst_frame,
+        .collect()
+}
+
+/// Mean vertex distances of the roll-out to the reference: frame 1 (the first prediction),
+/// frames 1–50, every predicted frame.
+fn versus(frames: &[Vec<[f32; 3]>], reference: &[Vec<[f32; 3]>]) -> Versus {
+    Versus::of(&distances_mm(frames, reference))
+}
+
+impl Versus {
+    /// From each frame's mean and largest distance (frame 0 the start).
+    fn of(per_frame: &[(f64, f64)]) -> Versus {
+        let mean = |s: &[(f64, f64)]| s.iter().map(|x| x.0).sum::<f64>() / s.len().max(1) as f64;
+        let predicted = &per_frame[1.min(per_frame.len())..];
+        let (worst_frame, max) =
+            per_frame
+                .iter()
+                .enumerate()
+                .fold((0, 0.0), |b, (f, x)| if x.1 > b.1 { (f, x.1) } else { b });
+        Versus {
+            one_step_mm: mean(&predicted[..1.min(predicted.len())]),
+            first_50_mm: mean(&predicted[..50.min(predicted.len())]),
+            clip_mm: mean(predicted),
+            max_mm: max,
+            worst_frame,
+        }
     }
 }

@@ -71,20 +71,15 @@ fn static_inputs(
     fps: f64,
 ) -> StaticInputs {
     let all = Tensor::arange(data.len() as i64, (Kind::Int64, data.garment.device()));
-    let rolled = Rolled {
-        garments: garments.shallow_clone(),
-        predicted: all.shallow_clone(),
-        back: history.each_ref().map(|h| h.shallow_clone()),
-    };
-    inputs_at(space, data, &rolled, history, &all, fps)
+    inputs_at(space, data, (garments, history), history, &all, fps)
 }
 
-/// The frozen space's inputs of frames `frames` (`rolled`'s entries in the same order), their
-/// garment histories read from `rolled`, in chunks.
+/// The frozen space's inputs of frames `frames`, their garment histories `back[k][i]` (the
+/// garment `k + 1` frames before `frames[i]`) indices into `garments`, in chunks.
 fn inputs_at(
     space: &crate::models::dynamic::Space,
     data: &FrameData,
-    rolled: &Rolled,
+    (garments, back): (&Tensor, &[Tensor; 3]),
     history: &[Tensor; 3],
     frames: &Tensor,
     fps: f64,
@@ -94,8 +89,8 @@ fn inputs_at(
     for start in (0..count).step_by(crate::models::PREDICT_CHUNK) {
         let n = (crate::models::PREDICT_CHUNK as i64).min(count - start);
         let idx = frames.narrow(0, start, n);
-        let back = rolled.back.each_ref().map(|b| b.narrow(0, start, n));
-        let h = history_of(data, &rolled.garments, back, history, &idx, fps);
+        let chunk = back.each_ref().map(|b| b.narrow(0, start, n));
+        let h = history_of(data, garments, chunk, history, &idx, fps);
         parts.push(StaticInputs::new(space, &h));
     }
     let cat =
@@ -325,7 +320,7 @@ impl MotionTrainer {
             let inputs = inputs_at(
                 space,
                 &self.data,
-                &rolled,
+                (&rolled.garments, &rolled.back),
                 &self.history,
                 &self.frames,
                 self.fps,
