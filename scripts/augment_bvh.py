@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Make new training motion from a BVH clip: its mirror image and/or a faster or slower take.
+"""Make new training motion from a BVH clip: its mirror image, a faster or slower take, the clip
+played backwards, and/or its legs and spine swayed away from the capture.
 
 The dynamic model learns from cloth simulations of the clips it is given, and a studio rarely
 has many clips per character. A mirrored clip (left and right swapped, the motion reflected
@@ -17,6 +18,16 @@ root's Xposition changes sign. This needs a left/right symmetric rest skeleton, 
 counterpart's OFFSET must be the mirror of the joint's within 20 % of its length (CMU's are within
 a few %). Speed: frame i of the output is the source at time i·speed·frame_time, channels
 interpolated linearly (angles unwrapped first, so ±180° does not spin), same frame time.
+Reverse: the frames in the opposite order (the cloth then lags the other way).
+Sway (`--sway SEED`, `--sway-deg A`): smooth random offsets, seeded, added to the capture's angles
+of the thighs, knees, lower spine and the root's heading, so the legs reach stances the capture
+never held (wider, narrower, more bent, turned). Each offset is a sum of three sines with periods
+of 1–4 s and random phases, scaled to peak at about A degrees (default 20): thighs ±A forwards
+and about their axis, and 0..A/2 outwards only (inwards the legs would pass through each other,
+further out a long skirt could not follow);
+knees 0..A more bent only (never hyper-extended); lower spine ±A/3; heading ±A/2. Joints are found
+by either CMU naming (MotionBuilder `LeftUpLeg`/`LeftLeg`, 3dsMax `LeftHip`/`LeftKnee`); a
+skeleton with neither is refused. Order: mirror, speed, reverse, sway.
 
 The output is written atomically. Exits 2 with one `error:` line on bad input.
 """
@@ -119,15 +130,78 @@ def resample(rows, channels, speed):
     return out
 
 
+# Sway roles: joint names (both CMU namings) → (role, side); side is the sign of Z that spreads the legs.
+SWAY_JOINTS = {
+    "LeftUpLeg": ("thigh", 1), "LeftHip": ("thigh", 1),
+    "RightUpLeg": ("thigh", -1), "RightHip": ("thigh", -1),
+    "LeftLeg": ("knee", -1), "LeftKnee": ("knee", -1),
+    "RightLeg": ("knee", 1), "RightKnee": ("knee", 1),
+    "LowerBack": ("spine", 0), "lowerback": ("spine", 0),
+    "Hips": ("root", 0),
+}
+
+
+def smooth_noise(rng, times):
+    """A sum of three sines with periods 1–4 s and random phases, peaking near ±1."""
+    waves = [(rng.uniform(1.0, 4.0), rng.uniform(0.0, 2 * math.pi)) for _ in range(3)]
+    return [sum(math.sin(2 * math.pi * t / period + phase) for period, phase in waves) / 2.2
+            for t in times]
+
+
+def sway_offsets(rng, role, side, channel, amplitude, times):
+    """Degrees to add to one channel over time; None where the role leaves the channel alone."""
+    if not channel.endswith("rotation"):
+        return None
+    axis = channel[0]
+    noise = smooth_noise(rng, times)
+    one_sided = [0.5 + 0.5 * max(-1.0, min(1.0, n)) for n in noise]  # 0..1
+    if role == "thigh":
+        if axis == "Z":
+            return [side * amplitude / 2 * u for u in one_sided]
+        return [amplitude * n for n in noise]
+    if role == "knee":
+        return [amplitude * u for u in one_sided] if axis == "X" else None
+    if role == "spine":
+        return [amplitude / 3 * n for n in noise]
+    if role == "root":
+        return [amplitude / 2 * n for n in noise] if axis == "Y" else None
+    return None
+
+
+def sway(path, rows, skeleton, seed, amplitude, frame_time):
+    import random
+    rng = random.Random(seed)
+    times = [i * frame_time for i in range(len(rows))]
+    start, touched = 0, 0
+    for name, _, channels in skeleton:
+        role, side = SWAY_JOINTS.get(name, (None, 0))
+        for k, ch in enumerate(channels):
+            offsets = sway_offsets(rng, role, side, ch, amplitude, times) if role else None
+            if offsets is not None:
+                touched += 1
+                for row, d in zip(rows, offsets):
+                    row[start + k] += d
+        start += len(channels)
+    if touched == 0:
+        fail(f"{path}: --sway found no thigh, knee, spine or root joint (CMU names expected)")
+    return rows
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("input", help="source BVH")
     ap.add_argument("output", help="BVH to write")
     ap.add_argument("--mirror", action="store_true", help="swap left and right (reflect x)")
     ap.add_argument("--speed", type=float, default=1.0, help="play rate, e.g. 0.8 or 1.25 (default 1)")
+    ap.add_argument("--reverse", action="store_true", help="play the clip backwards")
+    ap.add_argument("--sway", type=int, metavar="SEED", help="sway the legs and spine (seeded)")
+    ap.add_argument("--sway-deg", type=float, default=20.0, metavar="A",
+                    help="peak sway in degrees (default 20)")
     args = ap.parse_args()
-    if not args.mirror and args.speed == 1.0:
-        fail("nothing to do: give --mirror and/or --speed")
+    if not args.mirror and args.speed == 1.0 and not args.reverse and args.sway is None:
+        fail("nothing to do: give --mirror, --speed, --reverse and/or --sway")
+    if not 0.0 < args.sway_deg <= 45.0:
+        fail(f"--sway-deg {args.sway_deg}: expected more than 0 and at most 45")
     if not 0.1 <= args.speed <= 10.0:
         fail(f"--speed {args.speed}: expected 0.1 to 10")
 
@@ -140,10 +214,17 @@ def main():
         rows = [[row[src] * sign for src, sign in plan] for row in rows]
     if args.speed != 1.0:
         rows = resample(rows, channels, args.speed)
+    if args.reverse:
+        rows = rows[::-1]
+    if args.sway is not None:
+        frame_time = float(time.split(":", 1)[1])
+        rows = sway(args.input, rows, skeleton, args.sway, args.sway_deg, frame_time)
     body = [" ".join(f"{v:.5f}" for v in row) for row in rows]
     write_atomically(args.output, header + [f"Frames: {len(rows)}", time] + body)
-    what = " ".join(w for w in ("mirrored" if args.mirror else "",
-                                f"at {args.speed}× speed" if args.speed != 1.0 else "") if w)
+    what = ", ".join(w for w in ("mirrored" if args.mirror else "",
+                                 f"at {args.speed}× speed" if args.speed != 1.0 else "",
+                                 "reversed" if args.reverse else "",
+                                 f"swayed (seed {args.sway}, {args.sway_deg:g}°)" if args.sway is not None else "") if w)
     print(f"wrote {args.output}: {args.input} {what}, {len(rows)} frames")
 
 

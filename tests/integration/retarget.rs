@@ -182,3 +182,86 @@ fn a_mirrored_clip_is_the_mirror_image_and_a_faster_one_the_same_poses_sooner() 
         assert!(off < 1e-3, "frame {k}: {:.2} mm", off * 1e3);
     }
 }
+
+/// `scripts/augment_bvh.py --reverse` plays the same poses backwards; `--sway SEED` moves the legs
+/// away from the capture smoothly and outwards only (the knees end up further apart, never
+/// through each other), and the same seed gives the same clip.
+#[test]
+fn a_reversed_clip_plays_backwards_and_a_swayed_one_spreads_the_legs_smoothly() {
+    let dir = out_dir("augment_bvh_sway");
+    let augment = |out: &str, args: &[&str]| {
+        let path = dir.join(out);
+        run_ok(
+            std::process::Command::new("python3")
+                .arg(root().join("scripts/augment_bvh.py"))
+                .arg(sample("motions/131_01.bvh"))
+                .arg(&path)
+                .args(args),
+        );
+        path
+    };
+    let reversed = augment("reversed.bvh", &["--reverse"]);
+    let swayed = augment("swayed.bvh", &["--sway", "7"]);
+    let again = augment("swayed_again.bvh", &["--sway", "7"]);
+    assert_eq!(
+        std::fs::read(&swayed).unwrap(),
+        std::fs::read(&again).unwrap(),
+        "one seed, one clip"
+    );
+    let body = read_body(&sample("body.glb")).unwrap();
+    let sk = &body.skeleton;
+    let load = |p: &std::path::Path| load_clip(p, &[], sk, Some(30.0)).unwrap().animation;
+    let (a, w) = (load(&sample("motions/131_01.bvh")), load(&swayed));
+    let j = |n: &str| sk.joint_index(n).unwrap();
+    // At the capture's own rate (120 Hz), so frame for frame.
+    let native = |p: &std::path::Path| load_clip(p, &[], sk, None).unwrap().animation;
+    let (a120, r) = (native(&sample("motions/131_01.bvh")), native(&reversed));
+    let n = a120.frame_count();
+    assert_eq!(r.frame_count(), n);
+    for f in (0..n).step_by(7) {
+        let (p, q) = (
+            a120.joint_positions(sk, f),
+            r.joint_positions(sk, n - 1 - f),
+        );
+        let hand = |x: &[nalgebra::Vector3<f32>]| x[j("LeftHand")] - x[j("Hips")];
+        let off = (hand(&p) - hand(&q)).norm();
+        assert!(off < 1e-3, "frame {f}: {:.2} mm", off * 1e3);
+    }
+    // Knee to knee distance, and the largest step a knee takes between frames (relative to the
+    // hips), in the capture and the swayed clip.
+    let knees = |c: &garmentbake::rig::SkelAnimation| {
+        let (mut spread, mut step) = (Vec::new(), 0.0f32);
+        let mut last: Option<nalgebra::Vector3<f32>> = None;
+        for f in 0..c.frame_count() {
+            let p = c.joint_positions(sk, f);
+            spread.push((p[j("LeftLeg")] - p[j("RightLeg")]).norm());
+            let knee = p[j("LeftLeg")] - p[j("Hips")];
+            if let Some(l) = last {
+                step = step.max((knee - l).norm());
+            }
+            last = Some(knee);
+        }
+        (spread, step)
+    };
+    let ((sa, step_a), (sw, step_w)) = (knees(&a), knees(&w));
+    let mean = |v: &[f32]| v.iter().sum::<f32>() / v.len() as f32;
+    let closest = |v: &[f32]| v.iter().copied().fold(f32::INFINITY, f32::min);
+    eprintln!(
+        "knees apart: capture {:.0} mm (closest {:.0}), swayed {:.0} mm (closest {:.0}); largest knee step {:.1} → {:.1} mm",
+        mean(&sa) * 1e3,
+        closest(&sa) * 1e3,
+        mean(&sw) * 1e3,
+        closest(&sw) * 1e3,
+        step_a * 1e3,
+        step_w * 1e3
+    );
+    assert!(
+        mean(&sw) > mean(&sa) + 0.02,
+        "the sway must spread the legs"
+    );
+    assert!(
+        closest(&sw) > closest(&sa) - 0.02,
+        "the knees must not come closer than captured"
+    );
+    assert!(step_w < step_a * 1.5, "the sway must be smooth");
+}
