@@ -34,6 +34,7 @@ The output is written atomically. Exits 2 with one `error:` line on bad input.
 import argparse
 import math
 import os
+import random
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
@@ -153,6 +154,8 @@ def sway_offsets(rng, role, side, channel, amplitude, times):
     if not channel.endswith("rotation"):
         return None
     axis = channel[0]
+    # Drawn for every rotation channel of a swayed joint, used or not, so one seed's offsets
+    # stay the same clip whatever a role leaves alone (the simulated takes depend on it).
     noise = smooth_noise(rng, times)
     one_sided = [0.5 + 0.5 * max(-1.0, min(1.0, n)) for n in noise]  # 0..1
     if role == "thigh":
@@ -169,7 +172,6 @@ def sway_offsets(rng, role, side, channel, amplitude, times):
 
 
 def sway(path, rows, skeleton, seed, amplitude, frame_time):
-    import random
     rng = random.Random(seed)
     times = [i * frame_time for i in range(len(rows))]
     start, touched = 0, 0

@@ -9,8 +9,9 @@
 #   garmentbake train-dynamic --body samples/body.glb --garment samples/garments/skirt.obj \
 #       $(cat runs/takes/motions.txt) --fps 30 --epochs 0 --latent 128 --out runs/takes_space.safetensors
 #
-# A take whose cache exists is not simulated again (delete it to redo). About 0.6–0.9 s per
-# frame on 2 cores, 3,900 frames in all: roughly 45 minutes the first time.
+# `simulate` caches by the hash of its inputs (runs/sim), so a second run reads every take back in
+# a second and a take whose BVH changed is simulated again. About 0.6–0.9 s per frame on 2
+# cores, 3,900 frames in all: roughly 45 minutes the first time.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 DIR=${1:-runs/takes}
@@ -34,14 +35,14 @@ TAKES="
 "
 ARGS="--motion $M/01_01.bvh --sim runs/01_01_skirt_sim.pc2 --motion $M/131_01.bvh --sim runs/131_01_skirt_sim.pc2"
 for clip in 01_01 131_01; do
-    [ -s runs/${clip}_skirt_sim.pc2 ] || "$GB" simulate --body samples/body.glb \
+    "$GB" simulate --body samples/body.glb \
         --garment samples/garments/skirt.obj --motion $M/$clip.bvh --fps 30 --out runs/${clip}_skirt_sim.pc2
 done
 while read -r name source flags; do
     [ -n "$name" ] || continue
     # shellcheck disable=SC2086  # the flags are words
     python3 scripts/augment_bvh.py $M/$source.bvh "$DIR/$name.bvh" $flags
-    [ -s "$DIR/${name}_skirt_sim.pc2" ] || "$GB" simulate --body samples/body.glb \
+    "$GB" simulate --body samples/body.glb \
         --garment samples/garments/skirt.obj --motion "$DIR/$name.bvh" --fps 30 \
         --out "$DIR/${name}_skirt_sim.pc2"
     ARGS="$ARGS --motion $DIR/$name.bvh --sim $DIR/${name}_skirt_sim.pc2"

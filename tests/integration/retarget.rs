@@ -110,23 +110,26 @@ fn both_cmu_namings_are_recognised_without_a_map() {
     assert!((0.045..0.065).contains(&max.scale), "{}", max.scale);
 }
 
+/// `scripts/augment_bvh.py` on the shipped 131_01 with `args`, written to `dir/out`.
+fn augment_131_01(dir: &std::path::Path, out: &str, args: &[&str]) -> std::path::PathBuf {
+    let path = dir.join(out);
+    run_ok(
+        std::process::Command::new("python3")
+            .arg(root().join("scripts/augment_bvh.py"))
+            .arg(sample("motions/131_01.bvh"))
+            .arg(&path)
+            .args(args),
+    );
+    path
+}
+
 /// `scripts/augment_bvh.py --mirror` (new training motion for the dynamic model): the mirrored
 /// clip, retargeted onto the body, is the original's mirror image (x → −x): every hand, forearm,
 /// knee and foot is where the other side's was. `--speed 1.25` plays the same poses sooner.
 #[test]
 fn a_mirrored_clip_is_the_mirror_image_and_a_faster_one_the_same_poses_sooner() {
     let dir = out_dir("augment_bvh");
-    let augment = |out: &str, args: &[&str]| {
-        let path = dir.join(out);
-        run_ok(
-            std::process::Command::new("python3")
-                .arg(root().join("scripts/augment_bvh.py"))
-                .arg(sample("motions/131_01.bvh"))
-                .arg(&path)
-                .args(args),
-        );
-        path
-    };
+    let augment = |out: &str, args: &[&str]| augment_131_01(&dir, out, args);
     let (mirrored, faster) = (
         augment("mirrored.bvh", &["--mirror"]),
         augment("faster.bvh", &["--speed", "1.25"]),
@@ -189,17 +192,7 @@ fn a_mirrored_clip_is_the_mirror_image_and_a_faster_one_the_same_poses_sooner() 
 #[test]
 fn a_reversed_clip_plays_backwards_and_a_swayed_one_spreads_the_legs_smoothly() {
     let dir = out_dir("augment_bvh_sway");
-    let augment = |out: &str, args: &[&str]| {
-        let path = dir.join(out);
-        run_ok(
-            std::process::Command::new("python3")
-                .arg(root().join("scripts/augment_bvh.py"))
-                .arg(sample("motions/131_01.bvh"))
-                .arg(&path)
-                .args(args),
-        );
-        path
-    };
+    let augment = |out: &str, args: &[&str]| augment_131_01(&dir, out, args);
     let reversed = augment("reversed.bvh", &["--reverse"]);
     let swayed = augment("swayed.bvh", &["--sway", "7"]);
     let again = augment("swayed_again.bvh", &["--sway", "7"]);
