@@ -3,12 +3,13 @@
 //! `Σ ReLU(−o)`, `o = (g − b)·n` against the nearest posed body vertex, above a threshold), a
 //! residual displacement map `Θ` in UV space (bilinear per vertex, in the vertices' rest frames)
 //! is optimised with Adam for `|G̃ − G|₁ + |ΔG̃ − ΔG|₁ + λ3·L_collision` (λ3 = 100) and the
-//! resolved garment is fed forward (paper Sec. 5.1).
+//! resolved garment is fed forward (paper Sec. 5.1). One term beyond the paper keeps the edge
+//! lengths the garment had before the fix ([`LAMBDA_EDGES`]).
 
 use crate::body::{nearest_offsets, Body};
 use crate::geometry::PointIndex;
 use crate::models::dynamic::motion::History;
-use crate::models::dynamic::{BodyFrames, Dynamic, MeshLaplacian, Seeds, Space};
+use crate::models::dynamic::{BodyFrames, Dynamic, MeshEdges, MeshLaplacian, Seeds, Space};
 use crate::models::file::ModelFile;
 use crate::rig::JointTransform;
 use anyhow::{bail, Result};
@@ -19,6 +20,10 @@ use tch::{Kind, Tensor};
 
 /// λ3 of the collision objective.
 pub const LAMBDA_COLLISION: f64 = 100.0;
+/// Weight of the collision fix's edge-length term (not in the paper): without it the fix
+/// stretches the garment it pushes out (a vertex squeezed between two limbs is pushed out of one
+/// into the other) and the stretched garment is fed forward. Chosen on 131_02 (docs/dynamic.md).
+pub const LAMBDA_EDGES: f64 = 10.0;
 
 #[derive(Clone, Debug)]
 pub struct Settings {
@@ -30,6 +35,8 @@ pub struct Settings {
     pub threshold: f64,
     pub iterations: usize,
     pub learning_rate: f64,
+    /// Weight of the edge-length term `Σ_e ||G̃_e| − |G_e||` (0: the paper's objective).
+    pub edge_weight: f64,
     /// Texels per side of the residual map `Θ`.
     pub map: i64,
     /// Per latent dimension, the range the roll-out is held in (the model's training range).
@@ -47,6 +54,7 @@ impl Default for Settings {
             threshold: 0.001,
             iterations: 20,
             learning_rate: 0.002,
+            edge_weight: LAMBDA_EDGES,
             map: 32,
             latent_range: None,
             measure_collisions: true,
@@ -152,7 +160,10 @@ pub fn roll_out(
     let Some(first) = start.last().cloned() else {
         bail!("the roll-out's start has no garment");
     };
-    let laplacian = MeshLaplacian::new(triangles, first.len(), device);
+    let shape = ShapeTerms {
+        laplacian: MeshLaplacian::new(triangles, first.len(), device),
+        edges: MeshEdges::new(triangles, device),
+    };
     let range = settings.latent_range.as_ref().map(|(lo, hi)| {
         let t = |v: &[f32]| Tensor::from_slice(v).unsqueeze(0).to_device(device);
         (t(lo), t(hi))
@@ -193,7 +204,7 @@ pub fn roll_out(
                     &garment,
                     &h.now.transforms,
                     &PosedSurface::new(body, pose)?,
-                    &laplacian,
+                    &shape,
                     settings,
                 )
             } else {
@@ -270,16 +281,22 @@ fn collision_loss(g: &Tensor, planes: &(Tensor, Tensor), margin: f32) -> Tensor 
     (-(o - margin as f64)).relu().sum(Kind::Float)
 }
 
+/// The garment's operators the collision fix keeps its shape with.
+struct ShapeTerms {
+    laplacian: MeshLaplacian,
+    edges: MeshEdges,
+}
+
 /// The paper's test-time fix: when the collision loss passes the threshold, optimise `Θ` for
-/// `|G̃ − G|₁ + |ΔG̃ − ΔG|₁ + λ3·L_collision`. Returns the garment, the loss before and after,
-/// and the iterations run.
+/// `|G̃ − G|₁ + |ΔG̃ − ΔG|₁ + λ3·L_collision`, plus `λ_e·Σ_e ||G̃_e| − |G_e||` (edge lengths
+/// kept). Returns the garment, the loss before and after, and the iterations run.
 fn resolve_collisions(
     model: &Dynamic,
     canonical: &Tensor,
     garment: &Tensor,
     transforms: &Tensor,
     surface: &PosedSurface,
-    laplacian: &MeshLaplacian,
+    shape: &ShapeTerms,
     s: &Settings,
 ) -> (Tensor, f64, f64, usize) {
     let planes = nearest_planes(garment, surface);
@@ -293,7 +310,8 @@ fn resolve_collisions(
     let Ok(mut opt) = nn::Adam::default().build(&vs, s.learning_rate) else {
         return (garment.shallow_clone(), before, before, 0);
     };
-    let target_laplacian = tch::no_grad(|| laplacian.of(garment));
+    let target_laplacian = tch::no_grad(|| shape.laplacian.of(garment));
+    let target_lengths = tch::no_grad(|| shape.edges.lengths(garment));
     // The pose is fixed over the iterations: blend the seeds' transforms once.
     let blended = tch::no_grad(|| space.blended(transforms));
     let resolved = |theta: &Tensor| {
@@ -303,9 +321,13 @@ fn resolve_collisions(
     for _ in 0..s.iterations {
         let g = resolved(&theta);
         let loss = (&g - garment).abs().sum(Kind::Float)
-            + (laplacian.of(&g) - &target_laplacian)
+            + (shape.laplacian.of(&g) - &target_laplacian)
                 .abs()
                 .sum(Kind::Float)
+            + (shape.edges.lengths(&g) - &target_lengths)
+                .abs()
+                .sum(Kind::Float)
+                * s.edge_weight
             + collision_loss(&g, &planes, s.margin) * LAMBDA_COLLISION;
         opt.zero_grad();
         loss.backward();

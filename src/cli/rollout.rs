@@ -105,6 +105,10 @@ pub struct Args {
     /// Clearance the collision fix keeps from the body (mm).
     #[arg(long, default_value_t = 2.0)]
     pub collision_margin_mm: f32,
+    /// Weight of the collision fix's edge-length term, which keeps the pushed-out garment from
+    /// stretching; 0 gives the paper's objective (position + Laplacian + collision only).
+    #[arg(long, default_value_t = crate::rollout::LAMBDA_EDGES)]
+    pub collision_edge_weight: f64,
     #[command(flatten)]
     pub compute: ComputeArgs,
     #[command(flatten)]
@@ -308,10 +312,17 @@ impl Execute for Args {
                 );
             }
         }
+        if !(self.collision_edge_weight >= 0.0 && self.collision_edge_weight.is_finite()) {
+            bail!(
+                "--collision-edge-weight {}: give a weight of 0 or more (0: the paper's objective)",
+                self.collision_edge_weight
+            );
+        }
         let settings = Settings {
             collision_fix: !self.no_collision_fix,
             iterations: self.collision_iterations,
             margin: self.collision_margin_mm * 1e-3,
+            edge_weight: self.collision_edge_weight,
             ..Settings::default()
         };
         say(&format!(

@@ -11,12 +11,11 @@ use super::{Blowup, Training};
 use crate::body::Body;
 use crate::fabric::Fabric;
 use crate::garment::Garment;
-use crate::geometry::edges::unique_edges;
 use crate::geometry::sdf_grid::SdfGrid;
 use crate::geometry::{SurfaceIndex, TriMesh};
 use crate::models::dynamic::space::Consts;
 use crate::models::dynamic::{
-    seeds::PARTS, BodyFrames, Dynamic, MeshLaplacian, Seeds, Space, SpaceShape, UvRaster,
+    seeds::PARTS, BodyFrames, Dynamic, MeshEdges, MeshLaplacian, Seeds, Space, SpaceShape, UvRaster,
 };
 use crate::models::file::{
     self, BodyInfo, DynamicEpoch, DynamicInfo, DynamicTraining, GarmentInfo, KindInfo, ModelFile,
@@ -143,14 +142,12 @@ impl FrameData {
 /// Mesh operators for the losses: uniform Laplacian, edges and their rest lengths.
 struct MeshOps {
     laplacian: MeshLaplacian,
-    edges: Tensor,
+    edges: MeshEdges,
     rest_lengths: Tensor,
 }
 
 impl MeshOps {
     fn new(mesh: &TriMesh, device: Device) -> MeshOps {
-        let pairs = unique_edges(&mesh.triangles);
-        let edges: Vec<i64> = pairs.iter().flatten().map(|&v| v as i64).collect();
         let rest = Tensor::from_slice(
             &mesh
                 .positions
@@ -161,10 +158,8 @@ impl MeshOps {
         )
         .reshape([-1, 3])
         .to_device(device);
-        let edges = Tensor::from_slice(&edges)
-            .reshape([-1, 2])
-            .to_device(device);
-        let rest_lengths = edge_lengths(&rest.unsqueeze(0), &edges).squeeze_dim(0);
+        let edges = MeshEdges::new(&mesh.triangles, device);
+        let rest_lengths = edges.lengths(&rest.unsqueeze(0)).squeeze_dim(0);
         MeshOps {
             laplacian: MeshLaplacian::new(&mesh.triangles, mesh.vertex_count(), device),
             edges,
@@ -175,16 +170,6 @@ impl MeshOps {
     fn laplacian(&self, x: &Tensor) -> Tensor {
         self.laplacian.of(x)
     }
-}
-
-fn edge_lengths(x: &Tensor, edges: &Tensor) -> Tensor {
-    let a = x.index_select(1, &edges.select(1, 0));
-    let b = x.index_select(1, &edges.select(1, 1));
-    (a - b)
-        .square()
-        .sum_dim_intlist(2, false, Kind::Float)
-        .clamp_min(1e-12)
-        .sqrt()
 }
 
 /// The rest body's exact signed distance as a `[1, 1, D, H, W]` volume for trilinear sampling.
@@ -427,7 +412,7 @@ impl SpaceTrainer {
             (Kind::Float, self.settings.device),
         );
         let random = space.canonical(&zr);
-        let random_edges = (edge_lengths(&random, &self.ops.edges) - &self.ops.rest_lengths)
+        let random_edges = (self.ops.edges.lengths(&random) - &self.ops.rest_lengths)
             .abs()
             .mean(Kind::Float);
         // The hinge's floor is where the data already is: an unskinned simulated frame can lie

@@ -132,3 +132,33 @@ impl MeshLaplacian {
         x - sum / &self.degree
     }
 }
+
+/// A garment's unique edges, for edge-length terms: `lengths(x [B, V, 3]) → [B, E]`.
+pub struct MeshEdges {
+    edges: tch::Tensor,
+}
+
+impl MeshEdges {
+    pub fn new(triangles: &[[u32; 3]], device: tch::Device) -> MeshEdges {
+        let flat: Vec<i64> = crate::geometry::edges::unique_edges(triangles)
+            .iter()
+            .flatten()
+            .map(|&v| v as i64)
+            .collect();
+        MeshEdges {
+            edges: tch::Tensor::from_slice(&flat)
+                .reshape([-1, 2])
+                .to_device(device),
+        }
+    }
+
+    pub fn lengths(&self, x: &tch::Tensor) -> tch::Tensor {
+        let a = x.index_select(1, &self.edges.select(1, 0));
+        let b = x.index_select(1, &self.edges.select(1, 1));
+        (a - b)
+            .square()
+            .sum_dim_intlist(2, false, tch::Kind::Float)
+            .clamp_min(1e-12)
+            .sqrt()
+    }
+}
