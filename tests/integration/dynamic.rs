@@ -665,6 +665,17 @@ fn rollout_refuses_a_space_only_model_and_a_cache_of_another_mesh() {
         err.contains("--restart-every 6") && err.contains("1 to 5"),
         "{err}"
     );
+    // A negative weight of the collision fix's edge term.
+    let err = fails_with(
+        &model,
+        "rest",
+        &dir.join("never.pc2"),
+        &["--collision-edge-weight=-1"],
+    );
+    assert!(
+        err.contains("--collision-edge-weight -1") && err.contains("0 or more"),
+        "{err}"
+    );
 }
 
 /// `preview --side-by-side --error-vs`: one panel per cache and frame; the simulation against
