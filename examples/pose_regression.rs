@@ -151,15 +151,10 @@ fn sequences(file: &ModelFile, pairs: &[(String, String)], fps: f32) -> Result<V
 
 /// The frozen space's latent of every frame `[F, L]`.
 fn latents(model: &Dynamic, d: &FrameData) -> Tensor {
-    let chunk = garmentbake::models::PREDICT_CHUNK;
-    let parts: Vec<Tensor> = (0..d.len())
-        .step_by(chunk)
-        .map(|s| {
-            let (g, b, m) = d.batch(&d.range(s, chunk.min(d.len() - s)));
-            tch::no_grad(|| model.space.encode(&g, &b, &m))
-        })
-        .collect();
-    Tensor::cat(&parts, 0)
+    garmentbake::models::predict_chunks(d.len(), |s, n| {
+        let (g, b, m) = d.batch(&d.range(s, n));
+        model.space.encode(&g, &b, &m)
+    })
 }
 
 fn decode(model: &Dynamic, d: &FrameData, z: &Tensor) -> Tensor {

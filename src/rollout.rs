@@ -311,7 +311,9 @@ fn resolve_collisions(
         return (garment.shallow_clone(), before, before, 0);
     };
     let target_laplacian = tch::no_grad(|| shape.laplacian.of(garment));
-    let target_lengths = tch::no_grad(|| shape.edges.lengths(garment));
+    // Weight 0 is the paper's objective: the edge term is then left out, not computed at zero.
+    let target_lengths =
+        (s.edge_weight > 0.0).then(|| tch::no_grad(|| shape.edges.lengths(garment)));
     // The pose is fixed over the iterations: blend the seeds' transforms once.
     let blended = tch::no_grad(|| space.blended(transforms));
     let resolved = |theta: &Tensor| {
@@ -320,15 +322,14 @@ fn resolve_collisions(
     };
     for _ in 0..s.iterations {
         let g = resolved(&theta);
-        let loss = (&g - garment).abs().sum(Kind::Float)
+        let mut loss = (&g - garment).abs().sum(Kind::Float)
             + (shape.laplacian.of(&g) - &target_laplacian)
                 .abs()
-                .sum(Kind::Float)
-            + (shape.edges.lengths(&g) - &target_lengths)
-                .abs()
-                .sum(Kind::Float)
-                * s.edge_weight
-            + collision_loss(&g, &planes, s.margin) * LAMBDA_COLLISION;
+                .sum(Kind::Float);
+        if let Some(lengths) = &target_lengths {
+            loss += (shape.edges.lengths(&g) - lengths).abs().sum(Kind::Float) * s.edge_weight;
+        }
+        loss += collision_loss(&g, &planes, s.margin) * LAMBDA_COLLISION;
         opt.zero_grad();
         loss.backward();
         opt.step();
