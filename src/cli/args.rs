@@ -80,6 +80,40 @@ pub struct OutputArgs {
     pub json: bool,
 }
 
+/// The per-frame collision fix of a dynamic roll-out (`rollout`, and `train-dynamic
+/// --rollout-fix`'s rounds): a garment that crosses the body is pushed out by a residual map
+/// optimised in UV space.
+#[derive(clap::Args)]
+pub struct CollisionFixArgs {
+    /// Adam iterations of the collision fix on a frame that needs it.
+    #[arg(long, default_value_t = 20)]
+    pub collision_iterations: usize,
+    /// Clearance the collision fix keeps from the body (mm).
+    #[arg(long, default_value_t = 2.0)]
+    pub collision_margin_mm: f32,
+    /// Weight of the collision fix's edge-length term, which keeps the pushed-out garment from
+    /// stretching; 0 gives the paper's objective (position + Laplacian + collision only).
+    #[arg(long, default_value_t = crate::rollout::LAMBDA_EDGES)]
+    pub collision_edge_weight: f64,
+}
+
+impl CollisionFixArgs {
+    /// Roll-out settings with the fix on (`fix`) or off, checked.
+    pub fn settings(&self, fix: bool) -> Result<crate::rollout::Settings> {
+        let w = self.collision_edge_weight;
+        if !(w >= 0.0 && w.is_finite()) {
+            bail!("--collision-edge-weight {w}: give a weight of 0 or more (0: the paper's objective)");
+        }
+        Ok(crate::rollout::Settings {
+            collision_fix: fix,
+            iterations: self.collision_iterations,
+            margin: self.collision_margin_mm * 1e-3,
+            edge_weight: w,
+            ..crate::rollout::Settings::default()
+        })
+    }
+}
+
 /// The documented training defaults, shared with the library (`Settings::DEFAULT`).
 pub const TRAIN_DEFAULTS: Settings = Settings::DEFAULT;
 

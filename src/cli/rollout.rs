@@ -1,11 +1,12 @@
 //! `garmentbake rollout`: a dynamic model played over clips frame by frame, written as a point cache.
 
-use super::args::{write_cache, write_caches, ComputeArgs, OutputArgs};
+use super::args::{write_cache, write_caches, CollisionFixArgs, ComputeArgs, OutputArgs};
 use super::Execute;
 use crate::bake::sequence::{bake_sequence, SequenceReport};
 use crate::eval::lbs_frames;
 use crate::geometry::PointIndex;
 use crate::io::point_cache::read_pc2;
+use crate::metrics::versus::{distances_mm, spread, Ensemble, Versus};
 use crate::motion::{chain, load_clip, read_maps};
 use crate::rig::weights::smooth_garment_skin;
 use crate::rig::SkelAnimation;
@@ -30,6 +31,9 @@ use std::path::PathBuf;
 /// Writes the garment per frame as a point cache (.pc2, Blender's Mesh Cache reads it; .usda/
 /// .usdc/.usd: time-sampled points). --reference SIM.pc2 (a `simulate` cache of the same clip)
 /// measures the roll-out against it: after one step, over the first 50 frames, over the clip.
+/// Several --reference simulations of the clip (e.g. `simulate --blend 1.1`, a lead-in 0.1 s
+/// longer) also measure how far apart they are: a loose garment is chaotic, and a roll-out as
+/// far from them as they are from each other is as close as a re-run of the simulator.
 #[derive(clap::Args)]
 pub struct Args {
     /// Dynamic model with its motion stage (.safetensors).
@@ -70,9 +74,11 @@ pub struct Args {
     #[arg(long)]
     pub with_body: bool,
     /// A simulated cache of the same (single) clip to measure the roll-out against (and plain
-    /// LBS beside it).
-    #[arg(long)]
-    pub reference: Option<PathBuf>,
+    /// LBS beside it). Repeat for several simulations of the clip: the roll-out against each and
+    /// against their mean, and the simulations against each other (their own spread); the
+    /// first is the one --restart-every and --view use.
+    #[arg(long = "reference", value_name = "SIM.pc2")]
+    pub references: Vec<PathBuf>,
     /// With --reference: also roll the model out afresh every N frames of the clip, each time
     /// from the reference's own state there (its last three frames: the garment starts moving
     /// as simulated), for N frames, and report the mean error of these restarts. A long
@@ -80,7 +86,7 @@ pub struct Args {
     /// a clip whose lead-ins differ by 0.1 s can end centimetres apart); the restarts measure the
     /// model's dynamics over N frames at every part of the clip instead (the paper's
     /// "rollout-50", taken all along the clip).
-    #[arg(long, value_name = "N", requires = "reference")]
+    #[arg(long, value_name = "N", requires = "references")]
     pub restart_every: Option<usize>,
     /// Also write plain linear blend skinning of the rest garment (the fixed skin of the glTF
     /// output: proximity weights, no dynamics) per frame as a point cache, the baseline to
@@ -99,30 +105,23 @@ pub struct Args {
     /// Skip the per-frame collision fix.
     #[arg(long)]
     pub no_collision_fix: bool,
-    /// Adam iterations of the collision fix on a frame that needs it.
-    #[arg(long, default_value_t = 20)]
-    pub collision_iterations: usize,
-    /// Clearance the collision fix keeps from the body (mm).
-    #[arg(long, default_value_t = 2.0)]
-    pub collision_margin_mm: f32,
-    /// Weight of the collision fix's edge-length term, which keeps the pushed-out garment from
-    /// stretching; 0 gives the paper's objective (position + Laplacian + collision only).
-    #[arg(long, default_value_t = crate::rollout::LAMBDA_EDGES)]
-    pub collision_edge_weight: f64,
+    #[command(flatten)]
+    pub collision: CollisionFixArgs,
     #[command(flatten)]
     pub compute: ComputeArgs,
     #[command(flatten)]
     pub output: OutputArgs,
 }
 
-/// Mean vertex L2 distance to a reference, over spans of the roll-out.
-#[derive(Clone, Copy, Debug, Serialize)]
-pub struct Versus {
-    pub one_step_mm: f64,
-    pub first_50_mm: f64,
-    pub clip_mm: f64,
-    pub max_mm: f64,
-    pub worst_frame: usize,
+/// Several simulations of the clip (two or more --reference).
+#[derive(Clone, Debug, Serialize)]
+pub struct References {
+    pub paths: Vec<PathBuf>,
+    /// Every pair of simulations against each other, averaged: the simulator's own spread.
+    pub spread: Versus,
+    /// The roll-out, and plain LBS, against each simulation and against their mean.
+    pub rollout: Ensemble,
+    pub lbs: Ensemble,
 }
 
 /// Roll-outs restarted from the reference every `frames` frames, `frames` long.
@@ -216,7 +215,10 @@ pub struct Report {
     pub summary: Summary,
     /// The same per 100 frames: whether a long roll-out drifts or blows up.
     pub windows: Vec<Window>,
+    /// Against the (first) reference.
     pub reference: Option<Versus>,
+    /// With several references: against each, and their own spread.
+    pub references: Option<References>,
     /// With --restart-every: the model restarted from the reference along the clip.
     pub restarts: Option<Restarts>,
     /// Plain LBS of the rest garment against the same reference.
@@ -285,26 +287,16 @@ impl Execute for Args {
                 }
             }
         };
-        let reference = match &self.reference {
-            Some(path) => {
-                if self.motions.len() != 1 {
-                    bail!("--reference measures a single clip: give one --motion");
-                }
-                // The reference covers the clip, or the frames played (--frames).
-                let mut frames = read_pc2(path, n)?;
-                if frames.len() != clip_frames && frames.len() != poses.len() {
-                    bail!(
-                        "{}: {} frames, the clip has {clip_frames} at {fps} fps (simulated at another rate?)",
-                        path.display(),
-                        frames.len(),
-                    );
-                }
-                frames.truncate(poses.len());
-                Some(frames)
-            }
-            None => None,
-        };
-        if let (Some(every), Some(r)) = (self.restart_every, &reference) {
+        if !self.references.is_empty() && self.motions.len() != 1 {
+            bail!("--reference measures a single clip: give one --motion");
+        }
+        let references = self
+            .references
+            .iter()
+            .map(|path| read_reference(path, n, (clip_frames, poses.len()), fps))
+            .collect::<Result<Vec<_>>>()?;
+        let reference = references.first();
+        if let (Some(every), Some(r)) = (self.restart_every, reference) {
             if every == 0 || every >= r.len() {
                 bail!(
                     "--restart-every {every}: give a number of frames from 1 to {} (the clip's frames − 1)",
@@ -312,19 +304,7 @@ impl Execute for Args {
                 );
             }
         }
-        if !(self.collision_edge_weight >= 0.0 && self.collision_edge_weight.is_finite()) {
-            bail!(
-                "--collision-edge-weight {}: give a weight of 0 or more (0: the paper's objective)",
-                self.collision_edge_weight
-            );
-        }
-        let settings = Settings {
-            collision_fix: !self.no_collision_fix,
-            iterations: self.collision_iterations,
-            margin: self.collision_margin_mm * 1e-3,
-            edge_weight: self.collision_edge_weight,
-            ..Settings::default()
-        };
+        let settings = self.collision.settings(!self.no_collision_fix)?;
         say(&format!(
             "the model plays at {fps} fps (its training rate): clips are resampled to it"
         ));
@@ -334,7 +314,7 @@ impl Execute for Args {
             bar.set_position(f as u64 + 1)
         })?;
         bar.finish_and_clear();
-        let restarts = match (self.restart_every, &reference) {
+        let restarts = match (self.restart_every, reference) {
             (Some(every), Some(r)) => Some(restarts(
                 &file,
                 &poses,
@@ -409,7 +389,7 @@ impl Execute for Args {
                     (&file.body, &file.garment),
                     (&names.join(" + "), fps, &poses),
                     ("roll-out", &rollout.frames),
-                    reference.as_deref().map(|r| ("simulation", r)),
+                    reference.map(|r| ("simulation", r.as_slice())),
                 )?;
                 Some((page.clone(), bytes))
             }
@@ -426,11 +406,13 @@ impl Execute for Args {
             summary,
             windows: per_frame.chunks(WINDOW).map(Window::of).collect(),
             lbs_reference: reference
-                .as_ref()
                 .zip(lbs.as_ref())
-                .map(|(r, l)| versus(l, r)),
+                .map(|(r, l)| Versus::between(l, r)),
             lbs_out: self.lbs_out.clone(),
-            reference: reference.map(|r| versus(&rollout.frames, &r)),
+            reference: reference.map(|r| Versus::between(&rollout.frames, r)),
+            references: lbs
+                .as_ref()
+                .and_then(|l| self.against_all(&references, &rollout.frames, l)),
             restarts,
             out: self.out.clone(),
             out_bytes: std::fs::metadata(&self.out).map_or(0, |m| m.len()),
@@ -507,6 +489,9 @@ impl Execute for Args {
                 v.one_step_mm, v.first_50_mm, v.clip_mm, v.max_mm, v.worst_frame
             );
         }
+        if let Some(all) = &r.references {
+            print_references(all);
+        }
         if let Some(b) = &r.baked {
             println!(
                 "glTF: {} blend shapes (residual rank {}) within {:.3} mm of the roll-out (mean {:.4} mm)",
@@ -539,6 +524,22 @@ impl Execute for Args {
 }
 
 impl Args {
+    /// With two or more references: the roll-out and plain LBS against each and against their
+    /// mean, and the references' own spread.
+    fn against_all(
+        &self,
+        references: &[Vec<Vec<[f32; 3]>>],
+        rollout: &[Vec<[f32; 3]>],
+        lbs: &[Vec<[f32; 3]>],
+    ) -> Option<References> {
+        Some(References {
+            paths: self.references.clone(),
+            spread: spread(references)?,
+            rollout: Ensemble::of(rollout, references),
+            lbs: Ensemble::of(lbs, references),
+        })
+    }
+
     /// The fixed skin of the model's garment: the LBS baseline and the glTF's skin.
     fn garment_skin(file: &crate::models::file::ModelFile) -> Result<crate::rig::Skin> {
         let body = &file.body;
@@ -644,43 +645,59 @@ fn restarts(
     Ok(Restarts::of(every, each))
 }
 
-/// Mean and largest vertex distance (mm) of each frame to the reference's.
-fn distances_mm(frames: &[Vec<[f32; 3]>], reference: &[Vec<[f32; 3]>]) -> Vec<(f64, f64)> {
-    frames
-        .iter()
-        .zip(reference)
-        .map(|(a, b)| {
-            let d = crate::metrics::vertex_distances_mm(a, b);
-            (
-                d.iter().sum::<f64>() / d.len().max(1) as f64,
-                d.iter().copied().fold(0.0, f64::max),
-            )
-        })
-        .collect()
-}
-
-/// Mean vertex distances of the roll-out to the reference: frame 1 (the first prediction),
-/// frames 1–50, every predicted frame.
-fn versus(frames: &[Vec<[f32; 3]>], reference: &[Vec<[f32; 3]>]) -> Versus {
-    Versus::of(&distances_mm(frames, reference))
-}
-
-impl Versus {
-    /// From each frame's mean and largest distance (frame 0 the start).
-    fn of(per_frame: &[(f64, f64)]) -> Versus {
-        let mean = |s: &[(f64, f64)]| s.iter().map(|x| x.0).sum::<f64>() / s.len().max(1) as f64;
-        let predicted = &per_frame[1.min(per_frame.len())..];
-        let (worst_frame, max) =
-            per_frame
-                .iter()
-                .enumerate()
-                .fold((0, 0.0), |b, (f, x)| if x.1 > b.1 { (f, x.1) } else { b });
-        Versus {
-            one_step_mm: mean(&predicted[..1.min(predicted.len())]),
-            first_50_mm: mean(&predicted[..50.min(predicted.len())]),
-            clip_mm: mean(predicted),
-            max_mm: max,
-            worst_frame,
-        }
+/// A simulated cache of the clip: it covers the clip, or the frames played (--frames); cut to
+/// the frames played. `frames`: (the clip's, played).
+fn read_reference(
+    path: &std::path::Path,
+    vertices: usize,
+    (clip, played): (usize, usize),
+    fps: f32,
+) -> Result<Vec<Vec<[f32; 3]>>> {
+    let mut frames = read_pc2(path, vertices)?;
+    if frames.len() != clip && frames.len() != played {
+        bail!(
+            "{}: {} frames, the clip has {clip} at {fps} fps (simulated at another rate?)",
+            path.display(),
+            frames.len(),
+        );
     }
+    frames.truncate(played);
+    Ok(frames)
+}
+
+/// Several simulations: the roll-out and LBS against each, against their mean, and the
+/// simulations against each other, each as "after 1 step / first 50 frames / whole clip".
+fn print_references(all: &References) {
+    let spans = |v: &Versus| {
+        format!(
+            "{:.2} / {:.2} / {:.2} mm",
+            v.one_step_mm, v.first_50_mm, v.clip_mm
+        )
+    };
+    println!(
+        "against {} simulations (vertex L2, after 1 step / first 50 frames / whole clip):",
+        all.paths.len()
+    );
+    for ((path, m), l) in all.paths.iter().zip(&all.rollout.each).zip(&all.lbs.each) {
+        println!(
+            "  {}: roll-out {}, plain LBS {}",
+            path.display(),
+            spans(m),
+            spans(l)
+        );
+    }
+    println!(
+        "  roll-out, mean over the simulations: {} (their mean garment: {})",
+        spans(&all.rollout.mean_of_each),
+        spans(&all.rollout.versus_mean)
+    );
+    println!(
+        "  plain LBS, mean over the simulations: {} (their mean garment: {})",
+        spans(&all.lbs.mean_of_each),
+        spans(&all.lbs.versus_mean)
+    );
+    println!(
+        "  the simulations from each other (mean over pairs): {} — the simulator defines the garment only to this",
+        spans(&all.spread)
+    );
 }

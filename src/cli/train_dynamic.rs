@@ -1,6 +1,6 @@
 //! `garmentbake train-dynamic`: the motion-guided dynamic model, trained on simulated clips.
 
-use super::args::{ClipArgs, ComputeArgs, OutputArgs};
+use super::args::{ClipArgs, CollisionFixArgs, ComputeArgs, OutputArgs};
 use super::Execute;
 use crate::fabric::Fabric;
 use crate::garment::Garment;
@@ -108,9 +108,9 @@ pub struct Args {
     /// clips.
     #[arg(long, default_value_t = 0, value_name = "N")]
     pub rollout_window: usize,
-    /// With --rollout-fix: the clearance from the body the fix keeps (as `rollout`'s).
-    #[arg(long, default_value_t = 2.0)]
-    pub collision_margin_mm: f32,
+    /// With --rollout-fix: the fix as `rollout` runs it.
+    #[command(flatten)]
+    pub collision: CollisionFixArgs,
     /// Stage dynamic (experimental, not in the paper): feed the latent integrator the body
     /// drive too — the local rotations of the joints that move the garment, their speed, the
     /// root's velocity and turn. Without it the integrator sees the body only through the
@@ -356,6 +356,7 @@ impl Args {
         let Some(from) = &self.from else {
             bail!("--stage dynamic needs --from SPACE.safetensors (a model trained with --stage space)");
         };
+        let round = self.round_settings()?;
         let (file, device) = self.compute.load_model(from)?;
         let info = file.info.dynamic()?.clone();
         if self.resume && !crate::train::checkpoint_path(&self.out).exists() {
@@ -413,7 +414,7 @@ impl Args {
         let rounds = if self.resume {
             trainer.info().rollout_rounds.clone()
         } else {
-            self.fit_on_rollouts(&mut trainer, &train, device)?
+            self.fit_on_rollouts(&mut trainer, &train, &round, device)?
         };
         let done = trainer.epochs_done();
         let fitted = fit(&mut trainer, &self.fit_options())?;
@@ -425,10 +426,14 @@ impl Args {
                 let data = self.frame_data(&trainer.file, &s, device)?;
                 let bar =
                     crate::progress::bar(data.len() as u64, "held-out roll-out", self.output.json);
+                let plain = RolloutSettings {
+                    collision_fix: false,
+                    ..round.clone()
+                };
                 let rolled = roll_clips(
                     &trainer.file,
                     std::slice::from_ref(&s),
-                    None,
+                    &plain,
                     None,
                     device,
                     &mut |f| bar.set_position(f as u64),
@@ -463,6 +468,7 @@ impl Args {
         &self,
         trainer: &mut MotionTrainer,
         train: &[Sequence],
+        settings: &RolloutSettings,
         device: tch::Device,
     ) -> Result<Vec<RolloutRound>> {
         let frames = trainer.data.len() as u64;
@@ -472,14 +478,21 @@ impl Args {
             self.output.json,
         );
         let rounds = trainer.fit_on_rollouts(self.rollout_rounds, &mut |file, round| {
-            let fix = self.rollout_fix.then_some(self.collision_margin_mm * 1e-3);
             let window = (self.rollout_window > 0).then_some(self.rollout_window);
-            roll_clips(file, train, fix, window, device, &mut |f| {
+            roll_clips(file, train, settings, window, device, &mut |f| {
                 bar.set_position(round as u64 * frames + f as u64)
             })
         })?;
         bar.finish_and_clear();
         Ok(rounds)
+    }
+
+    /// The roll-outs of the rounds: the collision fix only with --rollout-fix; nothing measured.
+    fn round_settings(&self) -> Result<RolloutSettings> {
+        Ok(RolloutSettings {
+            measure_collisions: false,
+            ..self.collision.settings(self.rollout_fix)?
+        })
     }
 
     fn fit_options(&self) -> FitOptions<'_> {
@@ -521,24 +534,17 @@ impl Args {
 }
 
 /// The model rolled out over `clips` as a round of the roll-out-aware fit sees it (latents held
-/// in the training range; the collision fix only with `fix`, the clearance in metres): from each
-/// clip's first simulated frame, or with `window`, restarted every that many frames from the
-/// simulation's moving state there (its last three frames). `done` gets the frames so far.
+/// in the training range; the collision fix as `settings` say): from each clip's first
+/// simulated frame, or with `window`, restarted every that many frames from the simulation's
+/// moving state there (its last three frames). `done` gets the frames so far.
 fn roll_clips(
     file: &ModelFile,
     clips: &[Sequence],
-    fix: Option<f32>,
+    settings: &RolloutSettings,
     window: Option<usize>,
     device: tch::Device,
     done: &mut dyn FnMut(usize),
 ) -> Result<Rolled> {
-    let defaults = RolloutSettings::default();
-    let settings = RolloutSettings {
-        collision_fix: fix.is_some(),
-        margin: fix.unwrap_or(defaults.margin),
-        measure_collisions: false,
-        ..defaults
-    };
     let mut garments: Vec<Vec<[f32; 3]>> = Vec::new();
     let (mut predicted, mut back) = (Vec::new(), [Vec::new(), Vec::new(), Vec::new()]);
     let mut played = 0;

@@ -223,6 +223,26 @@ fn bad_inputs_name_the_file_and_write_nothing() {
     );
 }
 
+/// `train-dynamic --stage dynamic` on the space `space` and the six simulated frames `sim` of
+/// 131_01, written to `out`.
+fn motion_stage<'a>(space: &'a str, sim: &'a str, out: &'a str) -> Vec<&'a str> {
+    vec![
+        "train-dynamic",
+        "--stage",
+        "dynamic",
+        "--from",
+        space,
+        "--motion",
+        "samples/motions/131_01.bvh",
+        "--sim",
+        sim,
+        "--fps",
+        "30",
+        "--out",
+        out,
+    ]
+}
+
 /// The space (linear path only) and the motion stage on the six simulated frames.
 fn motion_model(
     dir: &Path,
@@ -235,26 +255,13 @@ fn motion_model(
         train(sim, &space, "0", &[]);
     }
     let out = dir.join(name);
-    let mut args = vec![
-        "train-dynamic",
-        "--stage",
-        "dynamic",
-        "--from",
+    let (space, sim, o) = (
         space.to_str().unwrap(),
-        "--motion",
-        "samples/motions/131_01.bvh",
-        "--sim",
         sim.to_str().unwrap(),
-        "--fps",
-        "30",
-        "--epochs",
-        "0",
-        "--threads",
-        "1",
-        "--out",
         out.to_str().unwrap(),
-        "--json",
-    ];
+    );
+    let mut args = motion_stage(space, sim, o);
+    args.extend_from_slice(&["--epochs", "0", "--threads", "1", "--json"]);
     args.extend_from_slice(extra);
     let report = garmentbake_json(&args);
     (out, report)
@@ -461,6 +468,7 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
     assert!(frames[0] == first[0], "frame 0 is the --init garment");
     let v = &plain["reference"];
     assert!(v["one_step_mm"].as_f64().unwrap() < 2.0 * f + 1.0, "{v}");
+    two_references_measure_their_own_spread(&model, &sim, &dir);
     gltf_replays_the_roll_out(&dir, &model, &sim, &out);
     usd_holds_the_roll_out_and_its_body(&dir, &model, &sim, &frames);
     previews_side_by_side(&dir, &sim, &out);
@@ -676,6 +684,62 @@ fn rollout_refuses_a_space_only_model_and_a_cache_of_another_mesh() {
         err.contains("--collision-edge-weight -1") && err.contains("0 or more"),
         "{err}"
     );
+    // train-dynamic's rounds run the same fix: the weight is refused before any fitting.
+    let never = dir.join("never.safetensors");
+    let mut args = motion_stage(
+        space.to_str().unwrap(),
+        sim.to_str().unwrap(),
+        never.to_str().unwrap(),
+    );
+    args.extend_from_slice(&["--rollout-fix", "--collision-edge-weight=-1"]);
+    let o = garmentbake_in_root(&args);
+    let err = one_error_line(&o, &never);
+    assert!(err.contains("--collision-edge-weight -1"), "{err}");
+    // Several references: each must be a simulation of the clip (the frame count checked).
+    let b = body.to_str().unwrap();
+    let extra = ["--frames", "6", "--reference", s, "--reference", b];
+    let err = fails_with(&model, s, &dir.join("never.pc2"), &extra);
+    assert!(err.contains("body.pc2"), "{err}");
+}
+
+/// Two --reference caches, the simulation and plain LBS (written by a first roll-out): LBS is
+/// then 0 from the second, the pair's spread is LBS's distance from the simulation, and the
+/// pair's mean garment lies half way (checked to fail with the mean garment taken as the first
+/// cache).
+fn two_references_measure_their_own_spread(model: &Path, sim: &Path, dir: &Path) {
+    let lbs = dir.join("lbs.pc2");
+    let (s, l) = (sim.to_str().unwrap(), lbs.to_str().unwrap());
+    let out = dir.join("both.pc2");
+    roll_out(model, sim, &out, &["--no-collision-fix", "--lbs-out", l]);
+    let both = roll_out(
+        model,
+        sim,
+        &out,
+        &["--no-collision-fix", "--reference", s, "--reference", l],
+    );
+    let clip = |v: &serde_json::Value| v["clip_mm"].as_f64().unwrap();
+    let all = &both["references"];
+    let lbs_to_sim = clip(&both["lbs_reference"]);
+    assert!(lbs_to_sim > 10.0, "{both}");
+    assert_eq!(all["paths"].as_array().unwrap().len(), 2, "{all}");
+    let each = &all["lbs"]["each"];
+    let near = |a: f64, b: f64| (a - b).abs() < 1e-3 * (1.0 + b);
+    assert!(
+        near(clip(&each[0]), lbs_to_sim) && clip(&each[1]) < 1e-4,
+        "{all}"
+    );
+    assert!(near(clip(&all["spread"]), lbs_to_sim), "{all}");
+    assert!(
+        near(clip(&all["lbs"]["versus_mean"]), lbs_to_sim / 2.0),
+        "{all}"
+    );
+    assert!(
+        near(clip(&all["lbs"]["mean_of_each"]), lbs_to_sim / 2.0),
+        "{all}"
+    );
+    // The roll-out, fitted to this simulation, is far closer to it than to LBS.
+    let roll = &all["rollout"]["each"];
+    assert!(clip(&roll[0]) < 0.1 * clip(&roll[1]), "{all}");
 }
 
 /// `preview --side-by-side --error-vs`: one panel per cache and frame; the simulation against

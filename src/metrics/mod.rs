@@ -1,12 +1,15 @@
 //! Garment metrics of posed frames against the posed body: edge error and strain, bending,
 //! collided vertices (split at body self-overlap), gravity energy. Plain arrays on the CPU,
 //! exact nearest neighbours: shared by training validation, `eval` and the exporters' checks.
+//! `versus`: a played garment against simulated reference caches.
 
 use crate::body::{Body, PosedBody};
 use crate::fabric::GRAVITY;
 use crate::geometry::{face_normals, PointIndex, SurfaceIndex, Topology, TriMesh};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+
+pub mod versus;
 
 /// The PBNS metrics, averaged over frames.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]

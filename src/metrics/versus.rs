@@ -1,0 +1,173 @@
+//! A played garment (a roll-out, plain LBS) against simulated reference caches of the same clip:
+//! mean vertex distance after one step, over the first 50 frames and over the whole clip.
+//! Against several simulations of one clip (e.g. lead-ins 0.1 s apart) also how far apart the
+//! simulations are: a loose garment is chaotic, so the simulator itself defines it only to that
+//! spread, and a model as far from them as they are from each other is as good as a re-run.
+
+use serde::Serialize;
+
+/// Frames per clip: per frame, per vertex.
+pub type Frames = [Vec<[f32; 3]>];
+
+/// Mean vertex L2 distance to a reference, over spans of the played frames (frame 0 the start).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Versus {
+    pub one_step_mm: f64,
+    pub first_50_mm: f64,
+    pub clip_mm: f64,
+    pub max_mm: f64,
+    pub worst_frame: usize,
+}
+
+impl Versus {
+    /// `frames` against `reference`, frame by frame (the shorter's length).
+    pub fn between(frames: &Frames, reference: &Frames) -> Versus {
+        Versus::of(&distances_mm(frames, reference))
+    }
+
+    /// From each frame's mean and largest distance (frame 0 the start, not a prediction).
+    pub fn of(per_frame: &[(f64, f64)]) -> Versus {
+        let mean = |s: &[(f64, f64)]| s.iter().map(|x| x.0).sum::<f64>() / s.len().max(1) as f64;
+        let predicted = &per_frame[1.min(per_frame.len())..];
+        let (worst_frame, max) =
+            per_frame
+                .iter()
+                .enumerate()
+                .fold((0, 0.0), |b, (f, x)| if x.1 > b.1 { (f, x.1) } else { b });
+        Versus {
+            one_step_mm: mean(&predicted[..1.min(predicted.len())]),
+            first_50_mm: mean(&predicted[..50.min(predicted.len())]),
+            clip_mm: mean(predicted),
+            max_mm: max,
+            worst_frame,
+        }
+    }
+
+    /// The means of several comparisons; the largest distance of all (and its frame).
+    pub fn mean(all: &[Versus]) -> Versus {
+        let n = all.len().max(1) as f64;
+        let mean = |f: fn(&Versus) -> f64| all.iter().map(f).sum::<f64>() / n;
+        let worst = all
+            .iter()
+            .copied()
+            .fold(None, |b: Option<Versus>, v| match b {
+                Some(b) if b.max_mm >= v.max_mm => Some(b),
+                _ => Some(v),
+            });
+        Versus {
+            one_step_mm: mean(|v| v.one_step_mm),
+            first_50_mm: mean(|v| v.first_50_mm),
+            clip_mm: mean(|v| v.clip_mm),
+            max_mm: worst.map_or(0.0, |w| w.max_mm),
+            worst_frame: worst.map_or(0, |w| w.worst_frame),
+        }
+    }
+}
+
+/// Mean and largest vertex distance (mm) of each frame to the reference's.
+pub fn distances_mm(frames: &Frames, reference: &Frames) -> Vec<(f64, f64)> {
+    frames
+        .iter()
+        .zip(reference)
+        .map(|(a, b)| {
+            let d = super::vertex_distances_mm(a, b);
+            (
+                d.iter().sum::<f64>() / d.len().max(1) as f64,
+                d.iter().copied().fold(0.0, f64::max),
+            )
+        })
+        .collect()
+}
+
+/// Played frames against several simulations of one clip.
+#[derive(Clone, Debug, Serialize)]
+pub struct Ensemble {
+    /// Against each simulation, in the order given.
+    pub each: Vec<Versus>,
+    /// Those averaged: how far the played garment is from a simulation.
+    pub mean_of_each: Versus,
+    /// Against the simulations' vertex-wise mean garment.
+    pub versus_mean: Versus,
+}
+
+impl Ensemble {
+    pub fn of(frames: &Frames, references: &[Vec<Vec<[f32; 3]>>]) -> Ensemble {
+        let each: Vec<Versus> = references
+            .iter()
+            .map(|r| Versus::between(frames, r))
+            .collect();
+        Ensemble {
+            mean_of_each: Versus::mean(&each),
+            versus_mean: Versus::between(frames, &mean_garment(references)),
+            each,
+        }
+    }
+}
+
+/// Every pair of simulations against each other, averaged: the simulator's own spread
+/// (`None` with fewer than two).
+pub fn spread(references: &[Vec<Vec<[f32; 3]>>]) -> Option<Versus> {
+    let pairs: Vec<Versus> = (0..references.len())
+        .flat_map(|i| (i + 1..references.len()).map(move |j| (i, j)))
+        .map(|(i, j)| Versus::between(&references[i], &references[j]))
+        .collect();
+    (!pairs.is_empty()).then(|| Versus::mean(&pairs))
+}
+
+/// The vertex-wise mean of several caches of one garment (the shortest's frames).
+fn mean_garment(caches: &[Vec<Vec<[f32; 3]>>]) -> Vec<Vec<[f32; 3]>> {
+    let frames = caches.iter().map(Vec::len).min().unwrap_or(0);
+    let n = caches.len().max(1) as f32;
+    (0..frames)
+        .map(|f| {
+            let mut sum = vec![[0.0f32; 3]; caches[0][f].len()];
+            for cache in caches {
+                for (s, p) in sum.iter_mut().zip(&cache[f]) {
+                    (0..3).for_each(|k| s[k] += p[k] / n);
+                }
+            }
+            sum
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cache(offsets_mm: &[f32]) -> Vec<Vec<[f32; 3]>> {
+        offsets_mm
+            .iter()
+            .map(|&d| vec![[d * 1e-3, 0.0, 0.0], [0.0, d * 1e-3, 1.0]])
+            .collect()
+    }
+
+    #[test]
+    fn the_spans_skip_the_start_and_the_mean_of_two_is_half_way() {
+        let a = cache(&[0.0; 60]);
+        let mut offsets = vec![0.0; 60];
+        offsets[0] = 100.0; // the start is not a prediction
+        offsets[1] = 4.0;
+        offsets[59] = 30.0;
+        let b = cache(&offsets);
+        let v = Versus::between(&b, &a);
+        assert!((v.one_step_mm - 4.0).abs() < 1e-3, "{v:?}");
+        assert!((v.first_50_mm - 4.0 / 50.0).abs() < 1e-3, "{v:?}");
+        assert!((v.clip_mm - 34.0 / 59.0).abs() < 1e-3, "{v:?}");
+        assert_eq!(v.worst_frame, 0);
+        // Against a and b: the played a is b's distance from b and 0 from itself; half of it
+        // from their mean; the pair's spread is that distance.
+        let e = Ensemble::of(&a, &[a.clone(), b.clone()]);
+        assert_eq!(e.each[0].clip_mm, 0.0);
+        assert!(
+            (e.mean_of_each.clip_mm - v.clip_mm / 2.0).abs() < 1e-4,
+            "{e:?}"
+        );
+        assert!(
+            (e.versus_mean.clip_mm - v.clip_mm / 2.0).abs() < 1e-4,
+            "{e:?}"
+        );
+        assert!((spread(&[a.clone(), b]).unwrap().clip_mm - v.clip_mm).abs() < 1e-4);
+        assert!(spread(&[a]).is_none());
+    }
+}
