@@ -13,11 +13,9 @@
 //! is their mean.
 
 use anyhow::{bail, Context, Result};
-use garmentbake::io::point_cache::read_pc2;
 use garmentbake::models::dynamic::motion::body_drive;
 use garmentbake::models::dynamic::{Dynamic, MotionShape, Seeds};
 use garmentbake::models::file::{self, ModelFile};
-use garmentbake::motion::load_clip;
 use garmentbake::train::dynamic::{FrameData, Reconstruction, Sequence};
 use garmentbake::train::motion::{drive_joints, history_indices};
 use std::path::Path;
@@ -134,17 +132,18 @@ fn training_pairs(path: &str) -> Result<Vec<(String, String)>> {
 }
 
 fn sequences(file: &ModelFile, pairs: &[(String, String)], fps: f32) -> Result<Vec<Sequence>> {
-    let vertices = file.garment.vertex_count();
+    let (skeleton, vertices) = (&file.body.skeleton, file.garment.vertex_count());
     pairs
         .iter()
         .map(|(m, s)| {
-            let clip = load_clip(Path::new(m), &[], &file.body.skeleton, Some(fps))?.animation;
-            let garment = read_pc2(Path::new(s), vertices)?;
-            Ok(Sequence {
-                name: m.clone(),
-                clip,
-                garment,
-            })
+            Sequence::load(
+                Path::new(m),
+                Path::new(s),
+                &[],
+                skeleton,
+                Some(fps),
+                vertices,
+            )
         })
         .collect()
 }

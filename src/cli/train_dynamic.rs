@@ -5,11 +5,10 @@ use super::Execute;
 use crate::fabric::Fabric;
 use crate::garment::Garment;
 use crate::io::gltf_body::read_body;
-use crate::io::point_cache::read_pc2;
 use crate::models::dynamic::SpaceShape;
 use crate::models::dynamic::{MotionShape, Seeds};
 use crate::models::file::{DynamicEpoch, ModelFile, MotionEpoch, RolloutRound};
-use crate::motion::{load_clip, read_maps};
+use crate::motion::read_maps;
 use crate::rig::Skeleton;
 use crate::rollout::{for_model, Init, Settings as RolloutSettings};
 use crate::train::dynamic::{FrameData, Reconstruction, Sequence, Settings, SpaceTrainer};
@@ -19,7 +18,7 @@ use crate::train::motion::{
 use crate::train::{fit, FitOptions, Fitted, Training};
 use anyhow::{bail, Result};
 use serde::Serialize;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// Train the dynamic garment model on cloth simulations (`garmentbake simulate`).
 ///
@@ -195,31 +194,8 @@ fn sequences(
     motions
         .iter()
         .zip(sims)
-        .map(|(m, s)| {
-            let clip = load_clip(m, &maps, skeleton, args.fps)?.animation;
-            let garment = read_pc2(s, vertices)?;
-            if garment.len() > clip.frame_count() {
-                bail!(
-                    "{}: {} frames, but {} has {} at {} fps (simulated at another --fps?)",
-                    s.display(),
-                    garment.len(),
-                    m.display(),
-                    clip.frame_count(),
-                    clip.fps
-                );
-            }
-            Ok(Sequence {
-                name: file_name(m),
-                clip,
-                garment,
-            })
-        })
+        .map(|(m, s)| Sequence::load(m, s, &maps, skeleton, args.fps, vertices))
         .collect()
-}
-
-fn file_name(p: &Path) -> String {
-    p.file_name()
-        .map_or(String::new(), |n| n.to_string_lossy().into_owned())
 }
 
 impl Execute for Args {

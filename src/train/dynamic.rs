@@ -35,6 +35,37 @@ pub struct Sequence {
 }
 
 impl Sequence {
+    /// A clip (`motion`, retargeted onto `skeleton` at `fps`) and its simulation (`sim`, a point
+    /// cache of `vertices` points per frame, no longer than the clip), named by the clip's file.
+    pub fn load(
+        motion: &Path,
+        sim: &Path,
+        maps: &[crate::io::joint_map::JointMap],
+        skeleton: &crate::rig::Skeleton,
+        fps: Option<f32>,
+        vertices: usize,
+    ) -> Result<Sequence> {
+        let clip = crate::motion::load_clip(motion, maps, skeleton, fps)?.animation;
+        let garment = crate::io::point_cache::read_pc2(sim, vertices)?;
+        if garment.len() > clip.frame_count() {
+            bail!(
+                "{}: {} frames, but {} has {} at {} fps (simulated at another --fps?)",
+                sim.display(),
+                garment.len(),
+                motion.display(),
+                clip.frame_count(),
+                clip.fps
+            );
+        }
+        Ok(Sequence {
+            name: motion
+                .file_name()
+                .map_or(String::new(), |n| n.to_string_lossy().into_owned()),
+            clip,
+            garment,
+        })
+    }
+
     /// The clip's pose at each simulated frame.
     pub fn poses(&self) -> Vec<Vec<crate::rig::JointTransform>> {
         (0..self.garment.len())
