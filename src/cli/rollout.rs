@@ -6,7 +6,7 @@ use crate::bake::sequence::{bake_sequence, SequenceReport};
 use crate::eval::lbs_frames;
 use crate::geometry::PointIndex;
 use crate::io::point_cache::read_pc2;
-use crate::metrics::versus::{distances_mm, spread, Ensemble, Versus};
+use crate::metrics::versus::{distances_mm, Ensemble, Simulations, Versus};
 use crate::motion::{chain, load_clip, read_maps};
 use crate::rig::weights::smooth_garment_skin;
 use crate::rig::SkelAnimation;
@@ -381,6 +381,8 @@ impl Execute for Args {
         if let (Some(path), Some(b)) = (&self.body_out, &bodies) {
             write_cache(path, &body.mesh, b, fps)?;
         }
+        let (first, lbs_reference, all) =
+            self.versus_references(&references, &rollout.frames, lbs.as_deref());
         let view = match &self.view {
             Some(page) => {
                 let names: Vec<String> = clips.iter().map(|c| c.name.clone()).collect();
@@ -405,14 +407,10 @@ impl Execute for Args {
             timing: timing(&rollout.timings),
             summary,
             windows: per_frame.chunks(WINDOW).map(Window::of).collect(),
-            lbs_reference: reference
-                .zip(lbs.as_ref())
-                .map(|(r, l)| Versus::between(l, r)),
+            lbs_reference,
             lbs_out: self.lbs_out.clone(),
-            reference: reference.map(|r| Versus::between(&rollout.frames, r)),
-            references: lbs
-                .as_ref()
-                .and_then(|l| self.against_all(&references, &rollout.frames, l)),
+            reference: first,
+            references: all,
             restarts,
             out: self.out.clone(),
             out_bytes: std::fs::metadata(&self.out).map_or(0, |m| m.len()),
@@ -524,20 +522,32 @@ impl Execute for Args {
 }
 
 impl Args {
-    /// With two or more references: the roll-out and plain LBS against each and against their
-    /// mean, and the references' own spread.
-    fn against_all(
+    /// The roll-out and plain LBS (present whenever there is a reference) against the first
+    /// reference, and with two or more, against each, their mean and their own spread (each
+    /// distance computed once: the first reference's are the ensembles' first).
+    fn versus_references(
         &self,
         references: &[Vec<Vec<[f32; 3]>>],
         rollout: &[Vec<[f32; 3]>],
-        lbs: &[Vec<[f32; 3]>],
-    ) -> Option<References> {
-        Some(References {
+        lbs: Option<&[Vec<[f32; 3]>]>,
+    ) -> (Option<Versus>, Option<Versus>, Option<References>) {
+        let (Some(first), Some(lbs)) = (references.first(), lbs) else {
+            return (None, None, None);
+        };
+        let Some(sims) = Simulations::new(references) else {
+            return (
+                Some(Versus::between(rollout, first)),
+                Some(Versus::between(lbs, first)),
+                None,
+            );
+        };
+        let all = References {
             paths: self.references.clone(),
-            spread: spread(references)?,
-            rollout: Ensemble::of(rollout, references),
-            lbs: Ensemble::of(lbs, references),
-        })
+            spread: sims.spread(),
+            rollout: sims.ensemble(rollout),
+            lbs: sims.ensemble(lbs),
+        };
+        (Some(all.rollout.each[0]), Some(all.lbs.each[0]), Some(all))
     }
 
     /// The fixed skin of the model's garment: the LBS baseline and the glTF's skin.

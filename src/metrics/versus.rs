@@ -47,13 +47,7 @@ impl Versus {
     pub fn mean(all: &[Versus]) -> Versus {
         let n = all.len().max(1) as f64;
         let mean = |f: fn(&Versus) -> f64| all.iter().map(f).sum::<f64>() / n;
-        let worst = all
-            .iter()
-            .copied()
-            .fold(None, |b: Option<Versus>, v| match b {
-                Some(b) if b.max_mm >= v.max_mm => Some(b),
-                _ => Some(v),
-            });
+        let worst = all.iter().max_by(|a, b| a.max_mm.total_cmp(&b.max_mm));
         Versus {
             one_step_mm: mean(|v| v.one_step_mm),
             first_50_mm: mean(|v| v.first_50_mm),
@@ -79,6 +73,13 @@ pub fn distances_mm(frames: &Frames, reference: &Frames) -> Vec<(f64, f64)> {
         .collect()
 }
 
+/// Two or more simulations of one clip, their vertex-wise mean garment computed once for every
+/// sequence compared with them.
+pub struct Simulations<'a> {
+    caches: &'a [Vec<Vec<[f32; 3]>>],
+    mean: Vec<Vec<[f32; 3]>>,
+}
+
 /// Played frames against several simulations of one clip.
 #[derive(Clone, Debug, Serialize)]
 pub struct Ensemble {
@@ -90,28 +91,38 @@ pub struct Ensemble {
     pub versus_mean: Versus,
 }
 
-impl Ensemble {
-    pub fn of(frames: &Frames, references: &[Vec<Vec<[f32; 3]>>]) -> Ensemble {
-        let each: Vec<Versus> = references
+impl<'a> Simulations<'a> {
+    /// `None` with fewer than two: one simulation has no spread and is its own mean.
+    pub fn new(caches: &'a [Vec<Vec<[f32; 3]>>]) -> Option<Simulations<'a>> {
+        (caches.len() >= 2).then(|| Simulations {
+            caches,
+            mean: mean_garment(caches),
+        })
+    }
+
+    /// `frames` against each simulation and against their mean garment.
+    pub fn ensemble(&self, frames: &Frames) -> Ensemble {
+        let each: Vec<Versus> = self
+            .caches
             .iter()
             .map(|r| Versus::between(frames, r))
             .collect();
         Ensemble {
             mean_of_each: Versus::mean(&each),
-            versus_mean: Versus::between(frames, &mean_garment(references)),
+            versus_mean: Versus::between(frames, &self.mean),
             each,
         }
     }
-}
 
-/// Every pair of simulations against each other, averaged: the simulator's own spread
-/// (`None` with fewer than two).
-pub fn spread(references: &[Vec<Vec<[f32; 3]>>]) -> Option<Versus> {
-    let pairs: Vec<Versus> = (0..references.len())
-        .flat_map(|i| (i + 1..references.len()).map(move |j| (i, j)))
-        .map(|(i, j)| Versus::between(&references[i], &references[j]))
-        .collect();
-    (!pairs.is_empty()).then(|| Versus::mean(&pairs))
+    /// Every pair of simulations against each other, averaged: the simulator's own spread.
+    pub fn spread(&self) -> Versus {
+        let c = self.caches;
+        let pairs: Vec<Versus> = (0..c.len())
+            .flat_map(|i| (i + 1..c.len()).map(move |j| (i, j)))
+            .map(|(i, j)| Versus::between(&c[i], &c[j]))
+            .collect();
+        Versus::mean(&pairs)
+    }
 }
 
 /// The vertex-wise mean of several caches of one garment (the shortest's frames).
@@ -157,7 +168,9 @@ mod tests {
         assert_eq!(v.worst_frame, 0);
         // Against a and b: the played a is b's distance from b and 0 from itself; half of it
         // from their mean; the pair's spread is that distance.
-        let e = Ensemble::of(&a, &[a.clone(), b.clone()]);
+        let pair = [a.clone(), b];
+        let sims = Simulations::new(&pair).unwrap();
+        let e = sims.ensemble(&a);
         assert_eq!(e.each[0].clip_mm, 0.0);
         assert!(
             (e.mean_of_each.clip_mm - v.clip_mm / 2.0).abs() < 1e-4,
@@ -167,7 +180,7 @@ mod tests {
             (e.versus_mean.clip_mm - v.clip_mm / 2.0).abs() < 1e-4,
             "{e:?}"
         );
-        assert!((spread(&[a.clone(), b]).unwrap().clip_mm - v.clip_mm).abs() < 1e-4);
-        assert!(spread(&[a]).is_none());
+        assert!((sims.spread().clip_mm - v.clip_mm).abs() < 1e-4);
+        assert!(Simulations::new(&[a]).is_none());
     }
 }
