@@ -14,6 +14,7 @@
 
 use anyhow::{bail, Context, Result};
 use garmentbake::models::dynamic::motion::body_drive;
+use garmentbake::models::dynamic::settle::PoseRegression;
 use garmentbake::models::dynamic::{Dynamic, MotionShape, Seeds};
 use garmentbake::models::file::{self, ModelFile};
 use garmentbake::train::dynamic::{FrameData, Reconstruction, Sequence};
@@ -71,7 +72,7 @@ fn main() -> Result<()> {
     println!(
         "{} training frames, {} pose features (lags {lags:?}); {} held-out frames",
         train.len(),
-        x.size()[1] - 1,
+        x.size()[1],
         evals[0].len()
     );
     let report = Report::new(&evals);
@@ -90,10 +91,10 @@ fn main() -> Result<()> {
     );
     let xe = features(&evals[0]);
     for ridge in RIDGES {
-        let w = fit(&x, &target, ridge);
+        let pose = PoseRegression::fit(&x, &target, ridge);
         report.line(
             &format!("pose regression, ridge {ridge}"),
-            &decode(dynamic, &evals[0], &xe.matmul(&w)),
+            &decode(dynamic, &evals[0], &pose.latent(&xe)),
         );
     }
     Ok(())
@@ -175,24 +176,17 @@ fn lagged(d: &FrameData, u: &Tensor, lags: &[i64]) -> Tensor {
         .map(|(&s, &e)| {
             let len = (e - s) as i64;
             let clip = u.narrow(0, s as i64, len);
-            let mut cols = vec![Tensor::ones([len, 1], (Kind::Float, Device::Cpu))];
-            for &k in lags {
-                let back: Vec<i64> = (0..len).map(|t| (t - k).max(0)).collect();
-                cols.push(clip.index_select(0, &Tensor::from_slice(&back)));
-            }
+            let cols: Vec<Tensor> = lags
+                .iter()
+                .map(|&k| {
+                    let back: Vec<i64> = (0..len).map(|t| (t - k).max(0)).collect();
+                    clip.index_select(0, &Tensor::from_slice(&back))
+                })
+                .collect();
             Tensor::cat(&cols, 1)
         })
         .collect();
     Tensor::cat(&rows, 0)
-}
-
-/// Ridge regression `x W ≈ target`, each column's penalty `ridge` times its mean square.
-fn fit(x: &Tensor, target: &Tensor, ridge: f64) -> Tensor {
-    let x = x.to_kind(Kind::Double);
-    let gram = x.tr().matmul(&x);
-    let penalty = (gram.diagonal(0, 0, 1).clamp_min(1e-9) * ridge).diag(0);
-    let rhs = x.tr().matmul(&target.to_kind(Kind::Double));
-    Tensor::linalg_solve(&(gram + penalty), &rhs, true).to_kind(Kind::Float)
 }
 
 /// Mean vertex L2 against each simulation and their mean, over the whole clip and its first

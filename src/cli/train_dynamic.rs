@@ -7,7 +7,7 @@ use crate::garment::Garment;
 use crate::io::gltf_body::read_body;
 use crate::models::dynamic::SpaceShape;
 use crate::models::dynamic::{MotionShape, Seeds};
-use crate::models::file::{DynamicEpoch, ModelFile, MotionEpoch, RolloutRound};
+use crate::models::file::{DynamicEpoch, ModelFile, MotionEpoch, RolloutRound, Settled};
 use crate::motion::read_maps;
 use crate::rig::Skeleton;
 use crate::rollout::{for_model, Init, Settings as RolloutSettings};
@@ -93,8 +93,23 @@ pub struct Args {
     /// histories too, with the simulation as the target, so that it learns to pull its own
     /// drift back (teacher forcing alone never shows it a drifted history). One round costs one
     /// roll-out of all training frames. 0: the teacher-forced fit alone (closest one step ahead).
-    #[arg(long, default_value_t = 3)]
-    pub rollout_rounds: usize,
+    /// Default: 0 when settling towards the pose (it keeps roll-outs stable by itself), 3 with
+    /// --no-pose-settle.
+    #[arg(long, value_name = "N")]
+    pub rollout_rounds: Option<usize>,
+    /// Stage dynamic: settling time towards the pose, in seconds (not in the paper). The
+    /// integrator's prediction is blended with the garment the body's pose alone predicts (a
+    /// ridge regression on the simulated frames), so whatever the history carries — a
+    /// simulated start, a swing, a drift — fades to 1/e in this time: roll-outs follow a known
+    /// start for the first frames and cannot run away over long shots. Longer: more of the
+    /// history's motion kept, more room to drift; 0: the pose alone. The regression's ridge is
+    /// chosen leaving one training clip out. Implies --body-drive.
+    #[arg(long, default_value_t = 0.3, value_name = "SECONDS")]
+    pub pose_settle: f64,
+    /// Stage dynamic: no settling, the paper's integrator alone (with --rollout-rounds 3 by
+    /// default to keep it stable).
+    #[arg(long, conflicts_with = "pose_settle")]
+    pub no_pose_settle: bool,
     /// Stage dynamic: the rounds' roll-outs run the collision fix, as `rollout` plays the
     /// model, so the integrator is refitted on the histories it meets at play time (the fix
     /// makes a round ~3× slower).
@@ -110,10 +125,10 @@ pub struct Args {
     /// With --rollout-fix: the fix as `rollout` runs it.
     #[command(flatten)]
     pub collision: CollisionFixArgs,
-    /// Stage dynamic (experimental, not in the paper): feed the latent integrator the body
-    /// drive too — the local rotations of the joints that move the garment, their speed, the
-    /// root's velocity and turn. Without it the integrator sees the body only through the
-    /// garment it carries, as in the paper. See docs/dynamic.md for what it measured.
+    /// Stage dynamic (not in the paper): feed the latent integrator the body drive too — the
+    /// local rotations of the joints that move the garment, their speed, the root's velocity
+    /// and turn. Without it the integrator sees the body only through the garment it carries,
+    /// as in the paper. On whenever settling (the default); see docs/dynamic.md.
     #[arg(long)]
     pub body_drive: bool,
     /// Stage dynamic, with --body-drive: ridge penalty on the drive's weights, relative to each
@@ -173,6 +188,8 @@ pub struct Report {
     /// Stage dynamic: the held-out clip rolled out from its first simulated frame (each
     /// prediction the next history, no collision fix, latents held in the training range).
     pub eval_rollout: Option<(String, Reconstruction)>,
+    /// Stage dynamic: how the model was settled towards the pose's garment; none: not settled.
+    pub settle: Option<Settled>,
 }
 
 /// Clips and their simulations, checked against each other.
@@ -232,6 +249,12 @@ impl Execute for Args {
             println!(
                 "roll-out-aware fit, round {}: training clips rolled out at mean {:.2} mm before the refit ({} rows)",
                 round.round, round.train_rollout_mean_mm, round.rows
+            );
+        }
+        if let Some(s) = r.settle {
+            println!(
+                "settled towards the pose's garment: a deviation fades to 1/e in {} s (pose regression ridge {}, chosen leaving one clip out)",
+                s.seconds, s.pose_ridge
             );
         }
         if let Some((name, e)) = &r.eval_rollout {
@@ -323,6 +346,7 @@ impl Args {
             last_motion: None,
             rollout_rounds: Vec::new(),
             eval_rollout: None,
+            settle: None,
             fitted,
         })
     }
@@ -333,6 +357,12 @@ impl Args {
             bail!("--stage dynamic needs --from SPACE.safetensors (a model trained with --stage space)");
         };
         let round = self.round_settings()?;
+        if !(self.pose_settle.is_finite() && self.pose_settle >= 0.0) {
+            bail!(
+                "--pose-settle {} is not a time: give seconds ≥ 0 (0: the pose alone), or --no-pose-settle",
+                self.pose_settle
+            );
+        }
         let (file, device) = self.compute.load_model(from)?;
         let info = file.info.dynamic()?.clone();
         if self.resume && !crate::train::checkpoint_path(&self.out).exists() {
@@ -363,7 +393,7 @@ impl Args {
             train.len()
         ));
         let mut shape = MotionShape::for_space(&info.shape.encoder, self.motion_features);
-        if self.body_drive {
+        if self.body_drive || self.settle_seconds().is_some() {
             shape.drive_joints = drive_joints(&file);
             let names: Vec<&str> = shape
                 .drive_joints
@@ -390,7 +420,14 @@ impl Args {
         let rounds = if self.resume {
             trainer.info().rollout_rounds.clone()
         } else {
-            self.fit_on_rollouts(&mut trainer, &train, &round, device)?
+            let rounds = self.fit_on_rollouts(&mut trainer, &train, &round, device)?;
+            if let Some(seconds) = self.settle_seconds() {
+                say(&format!(
+                    "settling towards the pose's garment in {seconds} s"
+                ));
+                trainer.settle_towards_pose(seconds)?;
+            }
+            rounds
         };
         let done = trainer.epochs_done();
         let fitted = fit(&mut trainer, &self.fit_options())?;
@@ -435,6 +472,7 @@ impl Args {
             last_motion: trainer.info().history.last().cloned(),
             rollout_rounds: rounds,
             eval_rollout,
+            settle: trainer.info().settle,
             fitted,
         })
     }
@@ -449,11 +487,11 @@ impl Args {
     ) -> Result<Vec<RolloutRound>> {
         let frames = trainer.data.len() as u64;
         let bar = crate::progress::bar(
-            frames * self.rollout_rounds as u64,
+            frames * self.rounds() as u64,
             "roll-out-aware fit",
             self.output.json,
         );
-        let rounds = trainer.fit_on_rollouts(self.rollout_rounds, &mut |file, round| {
+        let rounds = trainer.fit_on_rollouts(self.rounds(), &mut |file, round| {
             let window = (self.rollout_window > 0).then_some(self.rollout_window);
             roll_clips(file, train, settings, window, device, &mut |f| {
                 bar.set_position(round as u64 * frames + f as u64)
@@ -461,6 +499,17 @@ impl Args {
         })?;
         bar.finish_and_clear();
         Ok(rounds)
+    }
+
+    /// `--pose-settle` unless `--no-pose-settle`.
+    fn settle_seconds(&self) -> Option<f64> {
+        (!self.no_pose_settle).then_some(self.pose_settle)
+    }
+
+    /// `--rollout-rounds`, by default 0 when settling and 3 without.
+    fn rounds(&self) -> usize {
+        self.rollout_rounds
+            .unwrap_or(if self.no_pose_settle { 3 } else { 0 })
     }
 
     /// The roll-outs of the rounds: the collision fix only with --rollout-fix; nothing measured.

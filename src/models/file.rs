@@ -109,6 +109,19 @@ pub struct MotionInfo {
     /// The roll-out-aware fit's rounds (`train-dynamic --rollout-rounds`).
     #[serde(default)]
     pub rollout_rounds: Vec<RolloutRound>,
+    /// Settling towards the pose's garment (`train-dynamic --settle`); none: the integrator
+    /// alone (models from before it, `--no-settle`).
+    #[serde(default)]
+    pub settle: Option<Settled>,
+}
+
+/// How a motion encoder was settled towards the pose (`models::dynamic::settle`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Settled {
+    /// A deviation from the pose's garment fades to 1/e in this time (s).
+    pub seconds: f64,
+    /// The pose regression's relative ridge, chosen by leave-one-clip-out error.
+    pub pose_ridge: f64,
 }
 
 /// One round of the roll-out-aware fit: the regression's rows after it and the mean vertex

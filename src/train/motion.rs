@@ -11,9 +11,10 @@ use super::{Blowup, Training};
 use crate::models::dynamic::motion::{
     body_drive, motion_inputs, History, MotionInputs, StaticInputs,
 };
+use crate::models::dynamic::settle::{keep_per_frame, PoseRegression, POSE_RIDGES};
 use crate::models::dynamic::{Dynamic, MotionEncoder, MotionShape};
 use crate::models::file::{
-    self, KindInfo, ModelFile, MotionEpoch, MotionInfo, MotionTerms, RolloutRound,
+    self, KindInfo, ModelFile, MotionEpoch, MotionInfo, MotionTerms, RolloutRound, Settled,
 };
 use crate::models::Model;
 use anyhow::{bail, Result};
@@ -258,6 +259,7 @@ impl MotionTrainer {
             latent_max: hi,
             history: Vec::new(),
             rollout_rounds: Vec::new(),
+            settle: None,
         };
         dynamic.motion = Some(encoder);
         match &mut file.info.model {
@@ -353,6 +355,42 @@ impl MotionTrainer {
         }
         self.info_mut().rollout_rounds = done.clone();
         Ok(done)
+    }
+
+    /// Settles the fitted integrator towards the garment the pose alone predicts, fitted on
+    /// the simulated frames ([`MotionEncoder::settle_towards`]): a deviation fades to `1/e` in
+    /// `seconds`. Needs the body drive.
+    pub fn settle_towards_pose(&mut self, seconds: f64) -> Result<()> {
+        let teacher = &self.rows[0];
+        if teacher.drive.size()[1] == 0 {
+            bail!("settling towards the pose needs the body drive (--body-drive)");
+        }
+        let clip = self.clip_of_rows();
+        let (pose, pose_ridge) =
+            PoseRegression::fit_across_clips(&teacher.drive, &teacher.target, &clip, &POSE_RIDGES);
+        let keep = keep_per_frame(seconds, self.fps);
+        let Model::Dynamic(d) = &mut self.file.model else {
+            unreachable!("a dynamic trainer holds a dynamic model")
+        };
+        d.motion
+            .as_mut()
+            .expect("set in new")
+            .settle_towards(&pose, keep);
+        self.info_mut().settle = Some(Settled {
+            seconds,
+            pose_ridge,
+        });
+        Ok(())
+    }
+
+    /// The clip of each predicted frame (the teacher-forced rows' order).
+    fn clip_of_rows(&self) -> Vec<usize> {
+        let starts = &self.data.clip_starts;
+        Vec::<i64>::try_from(&self.frames)
+            .expect("frame indices")
+            .iter()
+            .map(|&t| starts.partition_point(|&s| s <= t as usize) - 1)
+            .collect()
     }
 
     pub fn dynamic(&self) -> &Dynamic {

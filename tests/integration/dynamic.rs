@@ -267,23 +267,29 @@ fn motion_model(
     (out, report)
 }
 
-fn roll_out(model: &Path, sim: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
-    let mut args = vec![
+/// `rollout` of 131_01 with `model` from `init`, written to `out`.
+fn rollout_of_131_01<'a>(model: &'a str, init: &'a str, out: &'a str) -> Vec<&'a str> {
+    vec![
         "rollout",
         "--model",
-        model.to_str().unwrap(),
+        model,
         "--motion",
         "samples/motions/131_01.bvh",
         "--init",
-        sim.to_str().unwrap(),
-        "--frames",
-        "6",
-        "--threads",
-        "1",
+        init,
         "--out",
+        out,
+    ]
+}
+
+fn roll_out(model: &Path, sim: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
+    let (m, s, o) = (
+        model.to_str().unwrap(),
+        sim.to_str().unwrap(),
         out.to_str().unwrap(),
-        "--json",
-    ];
+    );
+    let mut args = rollout_of_131_01(m, s, o);
+    args.extend_from_slice(&["--frames", "6", "--threads", "1", "--json"]);
     args.extend_from_slice(extra);
     garmentbake_json(&args)
 }
@@ -300,7 +306,13 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
         &dir,
         &sim,
         "held.safetensors",
-        &["--ridge", "1e9", "--rollout-rounds", "0"],
+        &[
+            "--ridge",
+            "1e9",
+            "--rollout-rounds",
+            "0",
+            "--no-pose-settle",
+        ],
     );
     // The same pinned integrator with the body drive free: the pose alone moves the latent
     // (checked to fail with the drive left out of the fit's rows).
@@ -316,6 +328,7 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
             "--body-drive",
             "--drive-ridge",
             "1e-3",
+            "--no-pose-settle",
         ],
     );
     let (h, d) = (
@@ -332,7 +345,13 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
         &dir,
         &sim,
         "fitted.safetensors",
-        &["--ridge", "1e-3", "--rollout-rounds", "0"],
+        &[
+            "--ridge",
+            "1e-3",
+            "--rollout-rounds",
+            "0",
+            "--no-pose-settle",
+        ],
     );
     let (h, f) = (
         held["train"]["mean_mm"].as_f64().unwrap(),
@@ -351,7 +370,7 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
         &dir,
         &sim,
         "refit.safetensors",
-        &["--ridge", "1", "--rollout-rounds", "2"],
+        &["--ridge", "1", "--rollout-rounds", "2", "--no-pose-settle"],
     );
     let rounds = refit["rollout_rounds"].as_array().unwrap();
     let rows: Vec<u64> = rounds.iter().map(|r| r["rows"].as_u64().unwrap()).collect();
@@ -377,6 +396,7 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
             "1",
             "--rollout-window",
             "2",
+            "--no-pose-settle",
         ],
     );
     let round = &windowed["rollout_rounds"][0];
@@ -401,6 +421,7 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
             "--rollout-fix",
             "--collision-margin-mm",
             "30",
+            "--no-pose-settle",
         ],
     );
     let first = fixed["rollout_rounds"][0]["train_rollout_mean_mm"]
@@ -469,6 +490,7 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
     let v = &plain["reference"];
     assert!(v["one_step_mm"].as_f64().unwrap() < 2.0 * f + 1.0, "{v}");
     two_references_measure_their_own_spread(&model, &sim, &dir);
+    settling_hands_the_garment_to_the_pose(&dir, &sim, f);
     gltf_replays_the_roll_out(&dir, &model, &sim, &out);
     usd_holds_the_roll_out_and_its_body(&dir, &model, &sim, &frames);
     previews_side_by_side(&dir, &sim, &out);
@@ -620,17 +642,8 @@ fn rollout_refuses_a_space_only_model_and_a_cache_of_another_mesh() {
     }
     let (dir, sim, space) = untrained_space("dyn_rollout_bad");
     let fails_with = |model: &Path, init: &str, out: &Path, extra: &[&str]| {
-        let mut args = vec![
-            "rollout",
-            "--model",
-            model.to_str().unwrap(),
-            "--motion",
-            "samples/motions/131_01.bvh",
-            "--init",
-            init,
-            "--out",
-            out.to_str().unwrap(),
-        ];
+        let (m, o) = (model.to_str().unwrap(), out.to_str().unwrap());
+        let mut args = rollout_of_131_01(m, init, o);
         args.extend_from_slice(extra);
         one_error_line(&garmentbake_in_root(&args), out)
     };
@@ -695,11 +708,64 @@ fn rollout_refuses_a_space_only_model_and_a_cache_of_another_mesh() {
     let o = garmentbake_in_root(&args);
     let err = one_error_line(&o, &never);
     assert!(err.contains("--collision-edge-weight -1"), "{err}");
+    // A settling time that is not one is refused before any fitting.
+    args.truncate(args.len() - 2);
+    args.push("--pose-settle=-1");
+    let err = one_error_line(&garmentbake_in_root(&args), &never);
+    assert!(err.contains("--pose-settle -1"), "{err}");
     // Several references: each must be a simulation of the clip (the frame count checked).
     let b = body.to_str().unwrap();
     let extra = ["--frames", "6", "--reference", s, "--reference", b];
     let err = fails_with(&model, s, &dir.join("never.pc2"), &extra);
     assert!(err.contains("body.pc2"), "{err}");
+}
+
+/// `--pose-settle`: the integrator is blended with the garment the pose alone predicts. With 0 s
+/// the history counts for nothing, so a roll-out from rest and one from the simulation agree
+/// from the first predicted frame on (checked to fail with the blend left out: 126 mm apart);
+/// the default 0.3 s keeps the history, so they differ, and its first step from
+/// the simulation stays near the teacher-forced fit's (`teacher_mm`, no settling).
+fn settling_hands_the_garment_to_the_pose(dir: &Path, sim: &Path, teacher_mm: f64) {
+    let from = |model: &Path, init: &str, name: &str| -> Vec<Vec<[f32; 3]>> {
+        let out = dir.join(name);
+        let (m, o) = (model.to_str().unwrap(), out.to_str().unwrap());
+        let mut args = rollout_of_131_01(m, init, o);
+        args.extend_from_slice(&["--frames", "6", "--threads", "1", "--no-collision-fix"]);
+        let o = garmentbake_in_root(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        garmentbake::io::point_cache::read_pc2(&out, 2808).unwrap()
+    };
+    let apart = |a: &[Vec<[f32; 3]>], b: &[Vec<[f32; 3]>]| -> f32 {
+        a[1..]
+            .iter()
+            .zip(&b[1..])
+            .flat_map(|(x, y)| x.iter().zip(y))
+            .map(|(p, q)| (0..3).map(|k| (p[k] - q[k]).abs()).fold(0.0, f32::max))
+            .fold(0.0, f32::max)
+    };
+    let s = sim.to_str().unwrap();
+    let extra = ["--ridge", "1e-3", "--pose-settle", "0"];
+    let (pose, report) = motion_model(dir, sim, "pose_only.safetensors", &extra);
+    assert_eq!(report["settle"]["seconds"], 0.0, "{report}");
+    let gap = apart(
+        &from(&pose, "rest", "p_rest.pc2"),
+        &from(&pose, s, "p_sim.pc2"),
+    );
+    assert!(gap < 1e-5, "the pose alone depends on the start: {gap} m");
+    let extra = ["--ridge", "1e-3"];
+    let (settled, report) = motion_model(dir, sim, "settled.safetensors", &extra);
+    assert_eq!(report["settle"]["seconds"], 0.3, "{report}");
+    let gap = apart(
+        &from(&settled, "rest", "s_rest.pc2"),
+        &from(&settled, s, "s_sim.pc2"),
+    );
+    assert!(
+        gap > 1e-3,
+        "the settled model forgot its start at once: {gap} m"
+    );
+    let one = report["train"]["mean_mm"].as_f64().unwrap();
+    eprintln!("one step: settled {one:.3} mm, teacher-forced {teacher_mm:.3} mm");
+    assert!(one < 3.0 * teacher_mm + 1.0, "{report}");
 }
 
 /// Two --reference caches, the simulation and plain LBS (written by a first roll-out): LBS is

@@ -9,6 +9,7 @@
 pub mod frames;
 pub mod motion;
 pub mod seeds;
+pub mod settle;
 pub mod space;
 pub mod uv;
 

@@ -29,6 +29,7 @@
 //!   the pose; the drive is the pose (and its speed) as a static deformation model sees it.
 
 use super::frames::BodyFrames;
+use super::settle::PoseRegression;
 use super::space::Space;
 use serde::{Deserialize, Serialize};
 use tch::nn::{self, Module};
@@ -448,6 +449,21 @@ impl MotionEncoder {
             let rhs = x.tr().matmul(&target.to_kind(Kind::Double)) + &keep * penalty.unsqueeze(1);
             let w = Tensor::linalg_solve(&(gram + penalty.diag(0)), &rhs, true);
             self.linear.copy_(&w.tr().to_kind(Kind::Float));
+        });
+    }
+
+    /// Settles the fitted linear path towards the pose's garment:
+    /// `W ← keep · W + (1 − keep) [0, 0, 0, P]` (see `settle`). Needs the body drive.
+    pub fn settle_towards(&mut self, pose: &PoseRegression, keep: f64) {
+        tch::no_grad(|| {
+            let own = 3 * self.linear.size()[0];
+            let tail = self.linear.size()[1] - own;
+            assert_eq!(pose.weights.size(), [own / 3, tail], "P must be [L, 1 + D]");
+            let _ = self.linear.g_mul_scalar_(keep);
+            let _ = self
+                .linear
+                .narrow(1, own, tail)
+                .g_add_(&(&pose.weights * (1.0 - keep)));
         });
     }
 
