@@ -110,6 +110,11 @@ pub struct Args {
     /// default to keep it stable).
     #[arg(long, conflicts_with = "pose_settle")]
     pub no_pose_settle: bool,
+    /// Stage dynamic, settling: the pose regression's ridge, relative to each pose input's mean
+    /// square. Default: the one of 1e-3, 0.01, 0.1, 1, 10 whose fit on all training clips but
+    /// one best predicts the clip left out (one clip: its halves).
+    #[arg(long, value_name = "R")]
+    pub pose_ridge: Option<f64>,
     /// Stage dynamic: the rounds' roll-outs run the collision fix, as `rollout` plays the
     /// model, so the integrator is refitted on the histories it meets at play time (the fix
     /// makes a round ~3× slower).
@@ -253,7 +258,7 @@ impl Execute for Args {
         }
         if let Some(s) = r.settle {
             println!(
-                "settled towards the pose's garment: a deviation fades to 1/e in {} s (pose regression ridge {}, chosen leaving one clip out)",
+                "settled towards the pose's garment: a deviation fades to 1/e in {} s (pose regression ridge {})",
                 s.seconds, s.pose_ridge
             );
         }
@@ -363,6 +368,9 @@ impl Args {
                 self.pose_settle
             );
         }
+        if let Some(r) = self.pose_ridge.filter(|r| !(r.is_finite() && *r >= 0.0)) {
+            bail!("--pose-ridge {r}: give a ridge ≥ 0");
+        }
         let (file, device) = self.compute.load_model(from)?;
         let info = file.info.dynamic()?.clone();
         if self.resume && !crate::train::checkpoint_path(&self.out).exists() {
@@ -425,7 +433,7 @@ impl Args {
                 say(&format!(
                     "settling towards the pose's garment in {seconds} s"
                 ));
-                trainer.settle_towards_pose(seconds)?;
+                trainer.settle_towards_pose(seconds, self.pose_ridge)?;
             }
             rounds
         };

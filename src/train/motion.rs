@@ -360,14 +360,16 @@ impl MotionTrainer {
     /// Settles the fitted integrator towards the garment the pose alone predicts, fitted on
     /// the simulated frames ([`MotionEncoder::settle_towards`]): a deviation fades to `1/e` in
     /// `seconds`. Needs the body drive.
-    pub fn settle_towards_pose(&mut self, seconds: f64) -> Result<()> {
+    /// The pose regression's ridge is `ridge`, or chosen leaving one clip out when none.
+    pub fn settle_towards_pose(&mut self, seconds: f64, ridge: Option<f64>) -> Result<()> {
         let teacher = &self.rows[0];
         if teacher.drive.size()[1] == 0 {
             bail!("settling towards the pose needs the body drive (--body-drive)");
         }
         let clip = self.clip_of_rows();
+        let ridges = ridge.map_or(POSE_RIDGES.to_vec(), |r| vec![r]);
         let (pose, pose_ridge) =
-            PoseRegression::fit_across_clips(&teacher.drive, &teacher.target, &clip, &POSE_RIDGES);
+            PoseRegression::fit_across_clips(&teacher.drive, &teacher.target, &clip, &ridges);
         let keep = keep_per_frame(seconds, self.fps);
         let Model::Dynamic(d) = &mut self.file.model else {
             unreachable!("a dynamic trainer holds a dynamic model")

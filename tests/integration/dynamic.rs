@@ -713,6 +713,10 @@ fn rollout_refuses_a_space_only_model_and_a_cache_of_another_mesh() {
     args.push("--pose-settle=-1");
     let err = one_error_line(&garmentbake_in_root(&args), &never);
     assert!(err.contains("--pose-settle -1"), "{err}");
+    args.pop();
+    args.push("--pose-ridge=-1");
+    let err = one_error_line(&garmentbake_in_root(&args), &never);
+    assert!(err.contains("--pose-ridge -1"), "{err}");
     // Several references: each must be a simulation of the clip (the frame count checked).
     let b = body.to_str().unwrap();
     let extra = ["--frames", "6", "--reference", s, "--reference", b];
