@@ -109,8 +109,8 @@ pub struct MotionInfo {
     /// The roll-out-aware fit's rounds (`train-dynamic --rollout-rounds`).
     #[serde(default)]
     pub rollout_rounds: Vec<RolloutRound>,
-    /// Settling towards the pose's garment (`train-dynamic --settle`); none: the integrator
-    /// alone (models from before it, `--no-settle`).
+    /// Settling towards the pose's garment (`train-dynamic --pose-settle`); none: the
+    /// integrator alone (models from before it, `--no-pose-settle`).
     #[serde(default)]
     pub settle: Option<Settled>,
 }

@@ -624,6 +624,8 @@ impl Training for MotionTrainer {
             bail!("{}: checkpoint was made with other inputs or settings (garment, clips, seed); start without --resume", path.display());
         }
         let history = theirs_motion.history.clone();
+        // The fitted path comes back as it was fitted: its rounds and settling with it.
+        let (rounds, settle) = (theirs_motion.rollout_rounds.clone(), theirs_motion.settle);
         let stored = dynamic.motion()?.parameters();
         let Model::Dynamic(d) = &mut self.file.model else {
             unreachable!("a dynamic trainer holds a dynamic model")
@@ -637,7 +639,8 @@ impl Training for MotionTrainer {
             &p.iter().map(|(n, t)| (n.clone(), t)).collect::<Vec<_>>(),
             &checkpoint.extra,
         )?;
-        self.info_mut().history = history;
+        let info = self.info_mut();
+        (info.history, info.rollout_rounds, info.settle) = (history, rounds, settle);
         Ok(())
     }
 

@@ -42,13 +42,17 @@ impl PoseRegression {
     /// best (mean square latent error over every clip's frames); `clip [F]` numbers each row's
     /// clip. One clip: its halves stand in for clips. A pose regression must hold for clips it
     /// was not fitted on, and which ridge does depends on the garment and the clips (stop 33:
-    /// the skirt's best was 0.01, the top's 1), so it is chosen per model, not fixed.
+    /// the skirt's best was 0.01, the top's 1), so it is chosen per model, not fixed. A single
+    /// ridge is simply fitted.
     pub fn fit_across_clips(
         drive: &Tensor,
         target: &Tensor,
         clip: &[usize],
         ridges: &[f64],
     ) -> (PoseRegression, f64) {
+        if let [only] = ridges {
+            return (PoseRegression::fit(drive, target, *only), *only);
+        }
         let folds = folds(clip);
         let error = |ridge: f64| -> f64 {
             folds
