@@ -4,7 +4,7 @@ use super::Execute;
 use crate::geometry::topology::Topology;
 use crate::io::bvh::Bvh;
 use crate::io::obj::read_obj;
-use crate::models::file::KindInfo;
+use crate::models::file::{KindInfo, MotionInfo};
 use anyhow::{bail, Context, Result};
 use exporters::FileKind;
 use serde_json::{json, Value};
@@ -130,14 +130,17 @@ fn model_report(path: &Path, full: bool) -> Result<Value> {
             json!({ "epochs": p.history.len(), "last": p.history.last() }),
         ),
         KindInfo::Dynamic(d) => (
-            json!({
-                "kind": info.model.kind(),
-                "stages": d.training.stages,
-                "space": format!("{}² UV map, {} seeds → latent {} → ξ {} ch → R {} × {}", d.shape.map, d.shape.seeds, d.shape.latent, d.shape.xi, d.shape.mlp_layers, d.shape.mlp),
-                "preset": d.shape.preset,
-                "fps": d.fps,
-                "kernel_radius_mm": d.parts.iter().zip(&d.radii).map(|(p, r)| format!("{p} {:.1}", r * 1e3)).collect::<Vec<_>>(),
-            }),
+            with_motion(
+                json!({
+                    "kind": info.model.kind(),
+                    "stages": d.training.stages,
+                    "space": format!("{}² UV map, {} seeds → latent {} → ξ {} ch → R {} × {}", d.shape.map, d.shape.seeds, d.shape.latent, d.shape.xi, d.shape.mlp_layers, d.shape.mlp),
+                    "preset": d.shape.preset,
+                    "fps": d.fps,
+                    "kernel_radius_mm": d.parts.iter().zip(&d.radii).map(|(p, r)| format!("{p} {:.1}", r * 1e3)).collect::<Vec<_>>(),
+                }),
+                d.motion.as_ref(),
+            ),
             json!(d.training),
             json!({ "epochs": d.history.len(), "last": d.history.last() }),
         ),
@@ -155,6 +158,30 @@ fn model_report(path: &Path, full: bool) -> Result<Value> {
         "history": history,
         "tensors": tensors,
     }))
+}
+
+/// `model` with a `motion` line when the model has its motion stage.
+fn with_motion(mut model: Value, motion: Option<&MotionInfo>) -> Value {
+    if let Some(m) = motion {
+        model["motion"] = motion_summary(m).into();
+    }
+    model
+}
+
+/// The motion stage's integrator in one line: how it was fitted and settled.
+fn motion_summary(m: &MotionInfo) -> String {
+    let settle = m.settle.map_or("not settled".to_string(), |s| {
+        format!(
+            "settled towards the pose in {} s (pose ridge {})",
+            s.seconds, s.pose_ridge
+        )
+    });
+    format!(
+        "integrator ridge {}, {} roll-out round(s), body drive on {} joint(s), {settle}",
+        m.ridge,
+        m.rollout_rounds.len(),
+        m.shape.drive_joints.len()
+    )
 }
 
 /// Indented `key: value` lines; short arrays stay on one line.

@@ -434,6 +434,7 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
     let o = garmentbake_in_root(&["inspect", model.to_str().unwrap()]);
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(text.contains("dynamic"), "{text}");
+    assert!(text.contains("0 roll-out round(s)") && text.contains("not settled"), "{text}");
     // The roll-out writes every frame, starting from the simulation's first.
     let out = dir.join("roll.pc2");
     let page = dir.join("roll.html");
@@ -759,6 +760,9 @@ fn settling_hands_the_garment_to_the_pose(dir: &Path, sim: &Path, teacher_mm: f6
     let extra = ["--ridge", "1e-3"];
     let (settled, report) = motion_model(dir, sim, "settled.safetensors", &extra);
     assert_eq!(report["settle"]["seconds"], 0.3, "{report}");
+    let o = garmentbake_in_root(&["inspect", settled.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("settled towards the pose in 0.3 s"), "{text}");
     let gap = apart(
         &from(&settled, "rest", "s_rest.pc2"),
         &from(&settled, s, "s_sim.pc2"),
