@@ -434,7 +434,10 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
     let o = garmentbake_in_root(&["inspect", model.to_str().unwrap()]);
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(text.contains("dynamic"), "{text}");
-    assert!(text.contains("0 roll-out round(s)") && text.contains("not settled"), "{text}");
+    assert!(
+        text.contains("0 roll-out round(s)") && text.contains("not settled"),
+        "{text}"
+    );
     // The roll-out writes every frame, starting from the simulation's first.
     let out = dir.join("roll.pc2");
     let page = dir.join("roll.html");
