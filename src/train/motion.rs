@@ -335,11 +335,7 @@ impl MotionTrainer {
             });
             let all = Rows::cat(&self.rows);
             let (ridge, drive_ridge) = (self.settings.ridge, self.settings.drive_ridge);
-            let Model::Dynamic(d) = &mut self.file.model else {
-                unreachable!("a dynamic trainer holds a dynamic model")
-            };
-            let encoder = d.motion.as_mut().expect("set in new");
-            encoder.init_linear(
+            self.encoder_mut().init_linear(
                 &all.inertia,
                 &all.previous,
                 &all.drive,
@@ -359,8 +355,8 @@ impl MotionTrainer {
 
     /// Settles the fitted integrator towards the garment the pose alone predicts, fitted on
     /// the simulated frames ([`MotionEncoder::settle_towards`]): a deviation fades to `1/e` in
-    /// `seconds`. Needs the body drive.
-    /// The pose regression's ridge is `ridge`, or chosen leaving one clip out when none.
+    /// `seconds`. The pose regression's ridge is `ridge`, or chosen leaving one clip out when
+    /// none. Needs the body drive.
     pub fn settle_towards_pose(&mut self, seconds: f64, ridge: Option<f64>) -> Result<()> {
         let teacher = &self.rows[0];
         if teacher.drive.size()[1] == 0 {
@@ -371,13 +367,7 @@ impl MotionTrainer {
         let (pose, pose_ridge) =
             PoseRegression::fit_across_clips(&teacher.drive, &teacher.target, &clip, &ridges);
         let keep = keep_per_frame(seconds, self.fps);
-        let Model::Dynamic(d) = &mut self.file.model else {
-            unreachable!("a dynamic trainer holds a dynamic model")
-        };
-        d.motion
-            .as_mut()
-            .expect("set in new")
-            .settle_towards(&pose, keep);
+        self.encoder_mut().settle_towards(&pose, keep);
         self.info_mut().settle = Some(Settled {
             seconds,
             pose_ridge,
@@ -404,6 +394,13 @@ impl MotionTrainer {
 
     fn encoder(&self) -> &MotionEncoder {
         self.dynamic().motion.as_ref().expect("set in new")
+    }
+
+    fn encoder_mut(&mut self) -> &mut MotionEncoder {
+        let Model::Dynamic(d) = &mut self.file.model else {
+            unreachable!("a dynamic trainer holds a dynamic model")
+        };
+        d.motion.as_mut().expect("set in new")
     }
 
     pub fn info(&self) -> &MotionInfo {
@@ -627,13 +624,7 @@ impl Training for MotionTrainer {
         // The fitted path comes back as it was fitted: its rounds and settling with it.
         let (rounds, settle) = (theirs_motion.rollout_rounds.clone(), theirs_motion.settle);
         let stored = dynamic.motion()?.parameters();
-        let Model::Dynamic(d) = &mut self.file.model else {
-            unreachable!("a dynamic trainer holds a dynamic model")
-        };
-        d.motion
-            .as_mut()
-            .expect("set in new")
-            .load_parameters(&stored)?;
+        self.encoder_mut().load_parameters(&stored)?;
         let p = self.encoder().parameters();
         self.adam.restore(
             &p.iter().map(|(n, t)| (n.clone(), t)).collect::<Vec<_>>(),
