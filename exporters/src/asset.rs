@@ -29,6 +29,10 @@ pub struct SkinBinding {
     pub joint_weights: Vec<f32>,
 }
 
+/// Steps of a SHORT normalized value on each side of zero: the stored integer `k` means
+/// `k / SHORT_STEPS` (glTF 2.0 §3.11).
+pub const SHORT_STEPS: f32 = 32767.0;
+
 /// A morph target: offsets added to the rest points before skinning.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct BlendShape {
@@ -52,6 +56,10 @@ pub struct Mesh {
     pub source_vertex: Vec<u32>,
     /// RGB base colour used by viewers (linear, 0..1).
     pub color: [f32; 3],
+    /// The blend shapes' offsets lie in [-1, 1] on the grid of SHORT normalized values
+    /// (`k / SHORT_STEPS`): glTF stores them as 16-bit integers under KHR_mesh_quantization,
+    /// half the bytes of floats and exact. Readers without the extension refuse such a file.
+    pub quantized_blend_shapes: bool,
 }
 
 /// A clip: joint local transforms and blend-shape weights sampled at a fixed rate.

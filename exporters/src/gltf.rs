@@ -4,7 +4,7 @@
 //! replays `LBS(T + Σ w_k D_k)` without any runtime of ours. `.glb` packs everything in one file;
 //! `.gltf` writes the JSON next to a `.bin`.
 
-use crate::asset::{unit_quat, BakedAsset, Mesh, SkelAnimation};
+use crate::asset::{unit_quat, BakedAsset, Mesh, SkelAnimation, SHORT_STEPS};
 use crate::atomic::write_atomic;
 use gltf_json as json;
 use json::validation::{Checked::Valid, USize64};
@@ -114,6 +114,47 @@ impl Builder {
         )
     }
 
+    /// SHORT normalized accessor (KHR_mesh_quantization) over `comps`-wide elements in [-1, 1],
+    /// each rounded to the nearest `k / SHORT_STEPS`; min/max in the stored integers, as the
+    /// spec has bounds in the component type.
+    fn shorts(
+        &mut self,
+        data: &[f32],
+        comps: usize,
+        target: Target,
+    ) -> json::Index<json::Accessor> {
+        let ints: Vec<i16> = data
+            .iter()
+            .map(|v| (v.clamp(-1.0, 1.0) * SHORT_STEPS).round() as i16)
+            .collect();
+        // Vertex attribute elements start on 4-byte boundaries: a SHORT VEC3 is padded to 8.
+        let stride = (2 * comps).next_multiple_of(4);
+        let bytes: Vec<u8> = ints
+            .chunks_exact(comps)
+            .flat_map(|e| {
+                let mut element: Vec<u8> = e.iter().flat_map(|v| v.to_le_bytes()).collect();
+                element.resize(stride, 0);
+                element
+            })
+            .collect();
+        let view = self.view(&bytes, target);
+        if stride != 2 * comps {
+            self.root.buffer_views[view.value()].byte_stride = Some(json::buffer::Stride(stride));
+        }
+        let as_f32: Vec<f32> = ints.iter().map(|&k| f32::from(k)).collect();
+        let (min, max) = min_max(&as_f32, comps);
+        let index = self.accessor(
+            view,
+            data.len() / comps,
+            json::accessor::ComponentType::I16,
+            type_of(comps),
+            min,
+            max,
+        );
+        self.root.accessors[index.value()].normalized = true;
+        index
+    }
+
     fn accessor(
         &mut self,
         view: json::Index<json::buffer::View>,
@@ -183,6 +224,15 @@ fn build(asset: &BakedAsset, bin_uri: Option<String>) -> (json::Root, Vec<u8>) {
             .map(|(k, v)| (k.clone(), serde_json::Value::from(v.clone())))
             .collect();
         b.root.asset.extras = extras(serde_json::Value::Object(map));
+    }
+    if asset
+        .meshes
+        .iter()
+        .any(|m| m.quantized_blend_shapes && !m.blend_shapes.is_empty())
+    {
+        let name = String::from("KHR_mesh_quantization");
+        b.root.extensions_used.push(name.clone());
+        b.root.extensions_required.push(name);
     }
     let joint_nodes = add_joints(&mut b, asset);
     let skin = (!joint_nodes.is_empty()).then(|| add_skin(&mut b, asset, &joint_nodes));
@@ -321,7 +371,11 @@ fn add_mesh(b: &mut Builder, mesh: &Mesh) -> json::Index<json::Mesh> {
         mesh.blend_shapes
             .iter()
             .map(|shape| json::mesh::MorphTarget {
-                positions: Some(b.floats(&flat(&shape.offsets), 3, Target::Vertex, true)),
+                positions: Some(if mesh.quantized_blend_shapes {
+                    b.shorts(&flat(&shape.offsets), 3, Target::Vertex)
+                } else {
+                    b.floats(&flat(&shape.offsets), 3, Target::Vertex, true)
+                }),
                 normals: shape
                     .normal_offsets
                     .as_ref()

@@ -5,6 +5,7 @@
 //! stacked offsets `O = X D` (frames × 3N). `D` is tall (3N × K after transposing), so the SVD is
 //! taken of the small `X Rᵀ` where `Dᵀ = Q R` (thin QR): `O = U Σ (Q V)ᵀ`.
 
+use exporters::asset::SHORT_STEPS;
 use nalgebra::DMatrix;
 
 /// The network's basis and its coefficients over the frames to bake.
@@ -131,18 +132,83 @@ impl Spectrum {
 
     /// The smallest count whose max error is within `tolerance` (m); the full rank otherwise.
     pub fn within(&self, reference: &DMatrix<f32>, tolerance: f32) -> Compressed {
-        let mut lo = 0;
-        let mut hi = self.rank();
-        // Error falls as targets are added; bisect on the count.
+        self.fewest(tolerance, |count| self.truncate(reference, count))
+    }
+
+    /// As [`Spectrum::within`], with the targets scaled to a largest component of 1
+    /// ([`Compressed::normalized`]) and, with `grid`, on the 16-bit grid: the rounding is
+    /// counted in the error the count must meet.
+    pub fn within_normalized(
+        &self,
+        reference: &DMatrix<f32>,
+        tolerance: f32,
+        grid: bool,
+    ) -> Compressed {
+        self.fewest(tolerance, |count| {
+            self.truncate(reference, count).normalized(reference, grid)
+        })
+    }
+
+    /// Bisects on the count: the error falls as targets are added.
+    fn fewest(&self, tolerance: f32, keep: impl Fn(usize) -> Compressed) -> Compressed {
+        let (mut lo, mut hi) = (0, self.rank());
         while lo < hi {
             let mid = (lo + hi) / 2;
-            if self.truncate(reference, mid).max_error <= tolerance {
+            if keep(mid).max_error <= tolerance {
                 hi = mid;
             } else {
                 lo = mid + 1;
             }
         }
-        self.truncate(reference, lo)
+        keep(lo)
+    }
+}
+
+impl Compressed {
+    /// Each target scaled to a largest component of 1, its weights scaled back so the offsets
+    /// are unchanged: a weight is then the target's largest displacement (m) at that frame.
+    /// With `grid`, the targets are rounded to the SHORT normalized grid `k / 32767`, as a glTF
+    /// under KHR_mesh_quantization stores them. Errors re-measured against `reference`.
+    pub fn normalized(mut self, reference: &DMatrix<f32>, grid: bool) -> Compressed {
+        for (k, target) in self.targets.iter_mut().enumerate() {
+            let scale = target.iter().flatten().fold(0.0f32, |m, v| m.max(v.abs()));
+            if scale == 0.0 {
+                continue;
+            }
+            for v in target.iter_mut().flatten() {
+                *v /= scale;
+                if grid {
+                    *v = (*v * SHORT_STEPS).round() / SHORT_STEPS;
+                }
+            }
+            self.weights.iter_mut().for_each(|w| w[k] *= scale);
+        }
+        (self.max_error, self.mean_error) = errors(reference, &self.targets, &self.weights);
+        self
+    }
+
+    /// Shifts each target's weights to start at 0 over the frames and returns the rest-space
+    /// offset `Σ_k min_k S_k` the base mesh takes on instead (the offsets are unchanged).
+    /// Readers clamp morph weights: Blender's glTF importer drops negative shape-key values to 0,
+    /// Godot clamps to [-1, 1]; normalized targets with weights from 0 play in both.
+    pub fn weights_from_zero(&mut self) -> Vec<[f32; 3]> {
+        let n = self.targets.first().map_or(0, Vec::len);
+        let mut base = vec![[0.0f32; 3]; n];
+        for (k, target) in self.targets.iter().enumerate() {
+            let lowest = self
+                .weights
+                .iter()
+                .map(|w| w[k])
+                .fold(f32::INFINITY, f32::min);
+            if !lowest.is_finite() {
+                continue;
+            }
+            self.weights.iter_mut().for_each(|w| w[k] -= lowest);
+            for (b, t) in base.iter_mut().zip(target) {
+                (0..3).for_each(|a| b[a] += lowest * t[a]);
+            }
+        }
+        base
     }
 }
 
@@ -232,6 +298,45 @@ mod tests {
             );
             let picked = s.within(&reference, 1e-6);
             assert_eq!(picked.targets.len(), 2);
+        }
+    }
+
+    #[test]
+    fn targets_on_the_short_grid_keep_the_offsets_within_the_tolerance() {
+        let (basis, coefficients) = fixture();
+        let reference = offset_matrix(&basis, &coefficients);
+        let s = spectrum_of(&reference);
+        let picked = s.within_normalized(&reference, 1e-5, true);
+        assert_eq!(picked.targets.len(), 2);
+        for target in &picked.targets {
+            let largest = target.iter().flatten().fold(0.0f32, |m, v| m.max(v.abs()));
+            assert!((largest - 1.0).abs() < 1e-6, "largest component {largest}");
+            for v in target.iter().flatten() {
+                let k = v * SHORT_STEPS;
+                assert!((k - k.round()).abs() < 1e-3, "{v} is off the grid");
+            }
+        }
+        // The rounding costs something, far under the tolerance, and is what is reported.
+        assert!(
+            picked.max_error > 0.0 && picked.max_error <= 1e-5,
+            "{}",
+            picked.max_error
+        );
+        let exact = errors(&reference, &picked.targets, &picked.weights).0;
+        assert_eq!(exact, picked.max_error);
+        // From zero: every weight non-negative, and the base's offset plus the shifted targets
+        // give the same offsets.
+        let mut shifted = picked.clone();
+        let base = shifted.weights_from_zero();
+        assert!(shifted.weights.iter().flatten().all(|&w| w >= 0.0));
+        assert!(shifted.weights.iter().flatten().any(|&w| w == 0.0));
+        let moved = offset_matrix(&shifted.targets, &shifted.weights);
+        let before = offset_matrix(&picked.targets, &picked.weights);
+        for f in 0..moved.ncols() {
+            for r in 0..moved.nrows() {
+                let now = moved[(r, f)] + base[r / 3][r % 3];
+                assert!((now - before[(r, f)]).abs() < 1e-6, "frame {f} row {r}");
+            }
         }
     }
 }

@@ -86,6 +86,7 @@ pub fn skinned_mesh_asset(
         blend_shapes: Vec::new(),
         source_vertex,
         color,
+        quantized_blend_shapes: false,
     }
 }
 

@@ -25,11 +25,17 @@ pub struct SequenceReport {
     pub rank: usize,
     pub max_error_m: f32,
     pub mean_error_m: f32,
+    /// The largest animated weight (the smallest is 0): a target's largest displacement in
+    /// metres, so under 1 for a garment, inside the range every reader keeps.
+    pub max_weight: f32,
+    /// The targets are 16-bit (KHR_mesh_quantization).
+    pub quantized: bool,
 }
 
 /// Bakes `frames` (world positions, the garment's vertex order) played over `animation` (the
 /// body's poses, one per frame) with `skin`, keeping the fewest blend shapes whose replay stays
-/// within `tolerance` metres of every frame.
+/// within `tolerance` metres of every frame. `quantize`: the targets on the 16-bit grid a glTF
+/// stores under KHR_mesh_quantization (half the bytes; the rounding counts in the tolerance).
 pub fn bake_sequence(
     skeleton: &Skeleton,
     garment: &TriMesh,
@@ -37,6 +43,7 @@ pub fn bake_sequence(
     animation: &SkelAnimation,
     frames: &[Vec<[f32; 3]>],
     tolerance: f32,
+    quantize: bool,
 ) -> Result<(BakedAsset, SequenceReport)> {
     check_sizes(garment, animation, frames)?;
     let blended = blended_per_frame(skeleton, skin, animation);
@@ -44,15 +51,22 @@ pub fn bake_sequence(
     let spectrum = spectrum_of(&residuals);
     // Convex blends of rigid transforms never enlarge a rest-space error, so the rest-space
     // tolerance bounds the world-space one; the world error is measured below all the same.
-    let kept = spectrum.within(&residuals, tolerance);
+    let mut kept = spectrum.within_normalized(&residuals, tolerance, quantize);
+    // Weights from 0 up (the base mesh takes the rest): readers that clamp them play it too.
+    let shift = kept.weights_from_zero();
+    let mut base = garment.clone();
+    for (p, d) in base.positions.iter_mut().zip(&shift) {
+        (0..3).for_each(|a| p[a] += d[a]);
+    }
     let (max_error_m, mean_error_m) = world_error(
-        &garment.positions,
+        &base.positions,
         &blended,
         frames,
         &kept.targets,
         &kept.weights,
     );
-    let mut mesh = skinned_mesh_asset("garment", garment, None, skin, GARMENT_COLOR);
+    let mut mesh = skinned_mesh_asset("garment", &base, None, skin, GARMENT_COLOR);
+    mesh.quantized_blend_shapes = quantize;
     mesh.blend_shapes = kept
         .targets
         .iter()
@@ -77,6 +91,8 @@ pub fn bake_sequence(
         rank: spectrum.rank(),
         max_error_m,
         mean_error_m,
+        max_weight: kept.weights.iter().flatten().fold(0.0, |m, &w| m.max(w)),
+        quantized: quantize,
     };
     Ok((asset, report))
 }
@@ -236,19 +252,23 @@ mod tests {
                 skin.skin_points(&moved, &skeleton.skinning_matrices(pose))
             })
             .collect();
-        let (asset, report) =
-            bake_sequence(&skeleton, &mesh, &skin, &animation, &frames, 1e-5).unwrap();
-        // Un-skinned, the residuals span the two modes only (left in world space, the skinning's
-        // rotations would need targets of their own).
-        assert_eq!(report.targets, 2, "{report:?}");
-        assert!(report.max_error_m < 1e-5, "{report:?}");
-        assert_eq!(asset.meshes[0].blend_shapes.len(), 2);
-        assert_eq!(
-            asset.animations[0].blend_shape_weights[0].1.len(),
-            2 * frames_n
-        );
-        asset.check().unwrap();
+        for quantize in [false, true] {
+            let (asset, report) =
+                bake_sequence(&skeleton, &mesh, &skin, &animation, &frames, 1e-5, quantize)
+                    .unwrap();
+            // Un-skinned, the residuals span the two modes only (left in world space, the
+            // skinning's rotations would need targets of their own); on the 16-bit grid too.
+            assert_eq!(report.targets, 2, "{report:?}");
+            assert!(report.max_error_m < 1e-5, "{report:?}");
+            assert_eq!(asset.meshes[0].blend_shapes.len(), 2);
+            assert_eq!(asset.meshes[0].quantized_blend_shapes, quantize);
+            assert_eq!(
+                asset.animations[0].blend_shape_weights[0].1.len(),
+                2 * frames_n
+            );
+            asset.check().unwrap();
+        }
         let wrong = &frames[..frames_n - 1];
-        assert!(bake_sequence(&skeleton, &mesh, &skin, &animation, wrong, 1e-5).is_err());
+        assert!(bake_sequence(&skeleton, &mesh, &skin, &animation, wrong, 1e-5, true).is_err());
     }
 }

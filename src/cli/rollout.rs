@@ -65,6 +65,12 @@ pub struct Args {
     /// every rolled-out vertex.
     #[arg(long, default_value_t = 1.0)]
     pub tolerance_mm: f32,
+    /// glTF output: store the blend shapes as 32-bit floats instead of 16-bit integers. By
+    /// default they are quantized (KHR_mesh_quantization: half the bytes, the rounding counted
+    /// in --tolerance-mm), which three.js and Blender read (both checked) as do most engines'
+    /// glTF loaders; this flag is for readers without that extension.
+    #[arg(long)]
+    pub float_targets: bool,
     /// Also write the posed body per frame as a point cache.
     #[arg(long)]
     pub body_out: Option<PathBuf>,
@@ -119,6 +125,9 @@ pub struct References {
     pub paths: Vec<PathBuf>,
     /// Every pair of simulations against each other, averaged: the simulator's own spread.
     pub spread: Versus,
+    /// Each simulation against the mean garment of the others, averaged: how well re-running
+    /// the simulator predicts a run it did not start from.
+    pub from_the_others: Versus,
     /// The roll-out, and plain LBS, against each simulation and against their mean.
     pub rollout: Ensemble,
     pub lbs: Ensemble,
@@ -492,9 +501,15 @@ impl Execute for Args {
         }
         if let Some(b) = &r.baked {
             println!(
-                "glTF: {} blend shapes (residual rank {}) within {:.3} mm of the roll-out (mean {:.4} mm)",
+                "glTF: {} blend shapes (residual rank {}), {}, weights 0 to {:.3}, within {:.3} mm of the roll-out (mean {:.4} mm)",
                 b.targets,
                 b.rank,
+                if b.quantized {
+                    "16-bit (KHR_mesh_quantization; --float-targets for 32-bit)"
+                } else {
+                    "32-bit floats"
+                },
+                b.max_weight,
                 b.max_error_m * 1e3,
                 b.mean_error_m * 1e3
             );
@@ -544,6 +559,7 @@ impl Args {
         let all = References {
             paths: self.references.clone(),
             spread: sims.spread(),
+            from_the_others: sims.from_the_others(),
             rollout: sims.ensemble(rollout),
             lbs: sims.ensemble(lbs),
         };
@@ -583,6 +599,7 @@ impl Args {
             &animation,
             frames,
             self.tolerance_mm * 1e-3,
+            !self.float_targets,
         )?;
         asset.provenance = vec![
             ("generator".into(), "garmentbake rollout".into()),
@@ -709,5 +726,9 @@ fn print_references(all: &References) {
     println!(
         "  the simulations from each other (mean over pairs): {} — the simulator defines the garment only to this",
         spans(&all.spread)
+    );
+    println!(
+        "  each simulation from the mean garment of the others: {} — re-simulating predicts a run this well",
+        spans(&all.from_the_others)
     );
 }

@@ -96,7 +96,7 @@ impl<'a> Simulations<'a> {
     pub fn new(caches: &'a [Vec<Vec<[f32; 3]>>]) -> Option<Simulations<'a>> {
         (caches.len() >= 2).then(|| Simulations {
             caches,
-            mean: mean_garment(caches),
+            mean: mean_garment(&caches.iter().collect::<Vec<_>>()),
         })
     }
 
@@ -123,11 +123,30 @@ impl<'a> Simulations<'a> {
             .collect();
         Versus::mean(&pairs)
     }
+
+    /// Each simulation against the vertex-wise mean garment of the others, averaged: how near
+    /// the simulator's own re-runs, pooled, come to one run they did not start from. A model
+    /// scoring this against the simulations predicts as well as re-simulating would.
+    pub fn from_the_others(&self) -> Versus {
+        let c = self.caches;
+        let each: Vec<Versus> = (0..c.len())
+            .map(|i| {
+                let others: Vec<_> = c
+                    .iter()
+                    .enumerate()
+                    .filter(|(j, _)| *j != i)
+                    .map(|x| x.1)
+                    .collect();
+                Versus::between(&c[i], &mean_garment(&others))
+            })
+            .collect();
+        Versus::mean(&each)
+    }
 }
 
 /// The vertex-wise mean of several caches of one garment (the shortest's frames).
-fn mean_garment(caches: &[Vec<Vec<[f32; 3]>>]) -> Vec<Vec<[f32; 3]>> {
-    let frames = caches.iter().map(Vec::len).min().unwrap_or(0);
+fn mean_garment(caches: &[&Vec<Vec<[f32; 3]>>]) -> Vec<Vec<[f32; 3]>> {
+    let frames = caches.iter().map(|c| c.len()).min().unwrap_or(0);
     let n = caches.len().max(1) as f32;
     (0..frames)
         .map(|f| {
@@ -181,6 +200,17 @@ mod tests {
             "{e:?}"
         );
         assert!((sims.spread().clip_mm - v.clip_mm).abs() < 1e-4);
+        // Two simulations: the others' mean is the other one, so this is the spread.
+        assert!((sims.from_the_others().clip_mm - v.clip_mm).abs() < 1e-4);
+        // Three on a line at 0, 1 and 3 (in units of b's distance): a is 2 from the mean of b
+        // and c, b 0.5 from a's and c's, c 2.5 from a's and b's: 5/3 on average.
+        let c = cache(&offsets.iter().map(|o| 3.0 * o).collect::<Vec<_>>());
+        let three = [pair[0].clone(), pair[1].clone(), c];
+        let others = Simulations::new(&three).unwrap().from_the_others();
+        assert!(
+            (others.clip_mm - v.clip_mm * 5.0 / 3.0).abs() < 1e-3,
+            "{others:?} against {v:?}"
+        );
         assert!(Simulations::new(&[a]).is_none());
     }
 }

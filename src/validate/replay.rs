@@ -208,22 +208,7 @@ pub fn replay_gltf(
 ) -> Result<ReplayError, String> {
     let scene = super::scene::Scene::new(doc, accessors);
     let root = &doc.root;
-    let want = reference.baked_vertex.len();
-    let candidates: Vec<usize> = (0..root.nodes.len())
-        .filter(|&n| root.nodes[n].mesh.is_some() && scene.positions(n, None, 0.0).len() == want)
-        .collect();
-    let node = match candidates.as_slice() {
-        [] => {
-            return Err(format!(
-                "no mesh has the model's {want} baked garment vertices (a bake of another model?)"
-            ))
-        }
-        [one] => *one,
-        many => *many
-            .iter()
-            .find(|&&n| root.nodes[n].name.as_deref() == Some("garment"))
-            .unwrap_or(&many[0]),
-    };
+    let (node, map) = garment_node(root, &scene, reference)?;
     let animation = match root
         .animations
         .iter()
@@ -247,10 +232,61 @@ pub fn replay_gltf(
         ));
     }
     let fps = reference.fps as f64;
-    Ok(compare(
-        reference,
-        &reference.baked_vertex,
-        tolerance_mm,
-        |f| scene.positions(node, Some(animation), f as f64 / fps),
-    ))
+    Ok(compare(reference, &map, tolerance_mm, |f| {
+        scene.positions(node, Some(animation), f as f64 / fps)
+    }))
+}
+
+/// The node playing the reference's garment and, per file vertex, the reference vertex it
+/// plays: a mesh with the bake's vertex count (named `garment` when several match), else one whose
+/// `sourceVertex` extras (written by our bakes when they split vertices at UV seams) map every
+/// vertex into the reference, e.g. a roll-out's glTF against its point cache.
+fn garment_node(
+    root: &gltf::json::Root,
+    scene: &super::scene::Scene,
+    reference: &Reference,
+) -> Result<(usize, Vec<u32>), String> {
+    let want = reference.baked_vertex.len();
+    let count = |n: usize| scene.positions(n, None, 0.0).len();
+    let meshes = || (0..root.nodes.len()).filter(|&n| root.nodes[n].mesh.is_some());
+    let exact: Vec<usize> = meshes().filter(|&n| count(n) == want).collect();
+    let named = |many: &[usize]| {
+        *many
+            .iter()
+            .find(|&&n| root.nodes[n].name.as_deref() == Some("garment"))
+            .unwrap_or(&many[0])
+    };
+    if !exact.is_empty() {
+        return Ok((named(&exact), reference.baked_vertex.clone()));
+    }
+    let points = reference.frames.first().map_or(0, Vec::len);
+    let mapped: Vec<(usize, Vec<u32>)> = meshes()
+        .filter_map(|n| {
+            let map = source_vertex(root, n)?;
+            (map.len() == count(n) && map.iter().all(|&v| (v as usize) < points))
+                .then_some((n, map))
+        })
+        .collect();
+    match mapped.as_slice() {
+        [] => Err(format!(
+            "no mesh has the model's {want} baked garment vertices (a bake of another model?)"
+        )),
+        [one] => Ok(one.clone()),
+        many => {
+            let nodes: Vec<usize> = many.iter().map(|m| m.0).collect();
+            let pick = named(&nodes);
+            Ok(many
+                .iter()
+                .find(|m| m.0 == pick)
+                .cloned()
+                .expect("picked from these"))
+        }
+    }
+}
+
+/// The `sourceVertex` extras of node `n`'s mesh, if it has them.
+fn source_vertex(root: &gltf::json::Root, n: usize) -> Option<Vec<u32>> {
+    let mesh = root.get(root.nodes[n].mesh?)?;
+    let extras: serde_json::Value = serde_json::from_str(mesh.extras.as_ref()?.get()).ok()?;
+    serde_json::from_value(extras.get("sourceVertex")?.clone()).ok()
 }

@@ -5,7 +5,7 @@
 //! morph targets consistent across primitives, animation samplers, and an acyclic node tree.
 //! Numeric tolerances are Khronos' own, so a file they accept we accept too.
 
-use super::accessor::{format_name, read, Values};
+use super::accessor::{component_size, format_name, read, Values};
 use super::container::Document;
 use super::Problems;
 use gltf::json;
@@ -24,6 +24,10 @@ pub type Accessors = Vec<Result<Values, String>>;
 
 /// Runs every rule; returns the accessors' data for later checks (replay) when the references
 /// themselves are sound.
+/// Extensions beyond gltf-json's own whose rules these checks know: KHR_mesh_quantization's
+/// integer morph-target deltas.
+const CHECKED_EXTENSIONS: [&str; 1] = ["KHR_mesh_quantization"];
+
 pub fn check(doc: &Document, p: &mut Problems) -> Option<Accessors> {
     let root = &doc.root;
     if let Some(problem) = crate::io::gltf_body::dangling_position(root) {
@@ -32,7 +36,13 @@ pub fn check(doc: &Document, p: &mut Problems) -> Option<Accessors> {
         return None;
     }
     let before = p.errors.len();
-    root.validate(root, json::Path::new, &mut |path, error| {
+    // gltf-json reports every required extension it does not implement; the ones whose rules
+    // are checked here are not unsupported.
+    let mut plain = root.clone();
+    plain
+        .extensions_required
+        .retain(|e| !CHECKED_EXTENSIONS.contains(&e.as_str()));
+    plain.validate(&plain, json::Path::new, &mut |path, error| {
         p.error(pointer(&path().to_string()), format!("{error:?} value"));
     });
     if root.asset.version.split('.').next() != Some("2") {
@@ -57,6 +67,10 @@ pub fn check(doc: &Document, p: &mut Problems) -> Option<Accessors> {
     let rules = Rules {
         root,
         accessors: &accessors,
+        quantized: root
+            .extensions_used
+            .iter()
+            .any(|e| e == CHECKED_EXTENSIONS[0]),
     };
     rules.meshes(p);
     rules.nodes(p);
@@ -166,6 +180,8 @@ fn accessor_values(root: &json::Root, i: usize, v: &Values, p: &mut Problems) {
 struct Rules<'a> {
     root: &'a json::Root,
     accessors: &'a Accessors,
+    /// KHR_mesh_quantization is used: integer morph-target deltas are allowed.
+    quantized: bool,
 }
 
 impl Rules<'_> {
@@ -211,6 +227,33 @@ impl Rules<'_> {
             .is_some_and(|a| a.min.is_some() && a.max.is_some())
     }
 
+    /// glTF 2.0 §3.6.2.4: every vertex attribute element starts on a 4-byte boundary (its
+    /// offset and its stride multiples of 4), e.g. a SHORT VEC3 needs a stride of 8.
+    fn vertex_aligned(&self, at: &str, index: json::Index<json::Accessor>, p: &mut Problems) {
+        let Some(acc) = self.root.get(index) else {
+            return;
+        };
+        let (Valid(c), Valid(t)) = (&acc.component_type, &acc.type_) else {
+            return;
+        };
+        let element = component_size(c.0) * t.multiplicity();
+        let stride = self.stride(index).unwrap_or(element);
+        let view_offset = acc
+            .buffer_view
+            .and_then(|v| self.root.get(v))
+            .and_then(|v| v.byte_offset)
+            .map_or(0, |o| o.0 as usize);
+        let offset = view_offset + acc.byte_offset.map_or(0, |o| o.0 as usize);
+        if !stride.is_multiple_of(4) || !offset.is_multiple_of(4) {
+            p.error(
+                at,
+                format!(
+                    "vertex attribute data must be aligned to 4 bytes (offset {offset}, stride {stride})"
+                ),
+            );
+        }
+    }
+
     fn stride(&self, index: json::Index<json::Accessor>) -> Option<usize> {
         let view = self.root.get(index)?.buffer_view?;
         Some(self.root.get(view)?.byte_stride?.0)
@@ -252,6 +295,7 @@ impl Rules<'_> {
         for (semantic, &index) in &prim.attributes {
             let Valid(semantic) = semantic else { continue };
             let here = format!("{at}/attributes/{semantic:?}");
+            self.vertex_aligned(&here, index, p);
             let v = match semantic {
                 S::Positions => {
                     if !self.has_bounds(index) {
@@ -353,6 +397,7 @@ impl Rules<'_> {
                 ("TANGENT", S::Tangents, target.tangents),
             ] {
                 let Some(index) = index else { continue };
+                self.vertex_aligned(&here, index, p);
                 if !prim.attributes.contains_key(&Valid(semantic)) {
                     p.error(
                         &here,
@@ -362,12 +407,17 @@ impl Rules<'_> {
                 if name == "POSITION" && !self.has_bounds(index) {
                     p.error(&here, "morph target POSITION accessor needs min and max");
                 }
-                let allowed = [
-                    (C::F32, false, T::Vec3),
-                    (C::I8, true, T::Vec3),
-                    (C::I16, true, T::Vec3),
-                ];
-                if let Some(v) = self.format(&here, name, index, &allowed, p) {
+                // Integer deltas are KHR_mesh_quantization's; core glTF has floats only.
+                let allowed = if self.quantized {
+                    &[
+                        (C::F32, false, T::Vec3),
+                        (C::I8, true, T::Vec3),
+                        (C::I16, true, T::Vec3),
+                    ][..]
+                } else {
+                    &[(C::F32, false, T::Vec3)][..]
+                };
+                if let Some(v) = self.format(&here, name, index, allowed, p) {
                     if v.count() != vertices {
                         p.error(
                             &here,

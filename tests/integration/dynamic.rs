@@ -557,6 +557,9 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
 
 /// The same roll-out as a compressed glTF: Khronos-valid, and three.js plays every frame within
 /// the tolerance of the point cache (`roll`, written without the collision fix, deterministic).
+/// Its blend shapes are 16-bit (KHR_mesh_quantization, required), and `validate --reference`
+/// replays the file against the cache as three.js does; `--float-targets` writes floats, a
+/// bigger file with the extension absent.
 fn gltf_replays_the_roll_out(dir: &Path, model: &Path, sim: &Path, roll: &Path) {
     let glb = dir.join("roll.glb");
     let r = roll_out(
@@ -591,6 +594,81 @@ fn gltf_replays_the_roll_out(dir: &Path, model: &Path, sim: &Path, roll: &Path) 
         "three.js replay max error {:.4} mm",
         err * 1e3
     );
+    blender_plays_the_roll_out(&glb, roll, &mesh.source_vertex);
+    let ours = garmentbake_json(&[
+        "validate",
+        glb.to_str().unwrap(),
+        "--reference",
+        roll.to_str().unwrap(),
+        "--fps",
+        "30",
+        "--tolerance-mm",
+        "0.5",
+        "--json",
+    ]);
+    let max_mm = ours["replay"]["max_mm"].as_f64().unwrap();
+    assert!(
+        (max_mm - err * 1e3).abs() < 1e-3,
+        "ours {max_mm} mm, three.js {} mm",
+        err * 1e3
+    );
+    let quantized = gltf_json_of(&glb);
+    assert_eq!(quantized["extensionsRequired"][0], "KHR_mesh_quantization");
+    let target = &quantized["meshes"][0]["primitives"][0]["targets"][0]["POSITION"];
+    let accessor = &quantized["accessors"][target.as_u64().unwrap() as usize];
+    assert_eq!(accessor["componentType"], 5122, "SHORT: {accessor}");
+    assert_eq!(accessor["normalized"], true, "{accessor}");
+    let floats = dir.join("roll_float.glb");
+    let r = roll_out(
+        model,
+        sim,
+        &floats,
+        &[
+            "--no-collision-fix",
+            "--tolerance-mm",
+            "0.5",
+            "--float-targets",
+        ],
+    );
+    assert_eq!(r["baked"]["targets"], baked["targets"], "{r}");
+    assert!(gltf_json_of(&floats).get("extensionsUsed").is_none());
+    // Each target's 12-byte float deltas become 8 bytes (three SHORTs padded to 4-byte
+    // alignment): the file shrinks by 4 bytes per vertex and target.
+    let size = |p: &Path| std::fs::metadata(p).unwrap().len() as f64;
+    let saved = 4.0 * accessor["count"].as_f64().unwrap() * baked["targets"].as_f64().unwrap();
+    assert!(
+        (size(&floats) - size(&glb) - saved).abs() < 0.05 * saved,
+        "16-bit targets: {} bytes, floats {}, expected {saved} fewer",
+        size(&glb),
+        size(&floats)
+    );
+}
+
+/// Blender's glTF importer plays the roll-out's glTF within its tolerance (0.5 mm) at every
+/// frame: its weights start at 0 (Blender drops negative shape-key values to 0; checked to fail
+/// with the weights left as the compression gives them).
+fn blender_plays_the_roll_out(glb: &Path, roll: &Path, map: &[u32]) {
+    let frames: Vec<usize> = (0..6).collect();
+    let result = blender_positions(glb, &frames, 30.0);
+    let (_, cache) = exporters::pc2::read(&std::fs::read(roll).unwrap()).unwrap();
+    let mesh = &result["meshes"][0];
+    for (i, &f) in frames.iter().enumerate() {
+        let blender = flat_positions(&mesh["frames"][i]["positions"]);
+        let reference: Vec<[f32; 3]> = map.iter().map(|&v| cache[f][v as usize]).collect();
+        let err = max_distance(&blender, &reference);
+        assert!(
+            err <= 0.5e-3 + 1e-5,
+            "Blender, frame {f}: {:.3} mm",
+            err * 1e3
+        );
+    }
+}
+
+/// The JSON chunk of a GLB.
+fn gltf_json_of(glb: &Path) -> serde_json::Value {
+    let bytes = std::fs::read(glb).unwrap();
+    let len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+    serde_json::from_slice(&bytes[20..20 + len]).unwrap()
 }
 
 /// `--with-body`: one USD stage with the garment and the posed body, read by pxr: both meshes'
@@ -806,6 +884,8 @@ fn two_references_measure_their_own_spread(model: &Path, sim: &Path, dir: &Path)
         "{all}"
     );
     assert!(near(clip(&all["spread"]), lbs_to_sim), "{all}");
+    // Of two, the others' mean garment is the other simulation.
+    assert!(near(clip(&all["from_the_others"]), lbs_to_sim), "{all}");
     assert!(
         near(clip(&all["lbs"]["versus_mean"]), lbs_to_sim / 2.0),
         "{all}"
