@@ -165,51 +165,58 @@ impl Spectrum {
 }
 
 impl Compressed {
-    /// Each target scaled to a largest component of 1, its weights scaled back so the offsets
-    /// are unchanged: a weight is then the target's largest displacement (m) at that frame.
-    /// With `grid`, the targets are rounded to the SHORT normalized grid `k / 32767`, as a glTF
-    /// under KHR_mesh_quantization stores them. Errors re-measured against `reference`.
+    /// [`unit_targets`], errors re-measured against `reference`.
     pub fn normalized(mut self, reference: &DMatrix<f32>, grid: bool) -> Compressed {
-        for (k, target) in self.targets.iter_mut().enumerate() {
-            let scale = target.iter().flatten().fold(0.0f32, |m, v| m.max(v.abs()));
-            if scale == 0.0 {
-                continue;
-            }
-            for v in target.iter_mut().flatten() {
-                *v /= scale;
-                if grid {
-                    *v = (*v * SHORT_STEPS).round() / SHORT_STEPS;
-                }
-            }
-            self.weights.iter_mut().for_each(|w| w[k] *= scale);
-        }
+        unit_targets(&mut self.targets, &mut self.weights, grid);
         (self.max_error, self.mean_error) = errors(reference, &self.targets, &self.weights);
         self
     }
 
-    /// Shifts each target's weights to start at 0 over the frames and returns the rest-space
-    /// offset `Σ_k min_k S_k` the base mesh takes on instead (the offsets are unchanged).
-    /// Readers clamp morph weights: Blender's glTF importer drops negative shape-key values to 0,
-    /// Godot clamps to [-1, 1]; normalized targets with weights from 0 play in both.
+    /// [`weights_from_zero`] on this set.
     pub fn weights_from_zero(&mut self) -> Vec<[f32; 3]> {
-        let n = self.targets.first().map_or(0, Vec::len);
-        let mut base = vec![[0.0f32; 3]; n];
-        for (k, target) in self.targets.iter().enumerate() {
-            let lowest = self
-                .weights
-                .iter()
-                .map(|w| w[k])
-                .fold(f32::INFINITY, f32::min);
-            if !lowest.is_finite() {
-                continue;
-            }
-            self.weights.iter_mut().for_each(|w| w[k] -= lowest);
-            for (b, t) in base.iter_mut().zip(target) {
-                (0..3).for_each(|a| b[a] += lowest * t[a]);
+        weights_from_zero(&self.targets, &mut self.weights)
+    }
+}
+
+/// Each target scaled to a largest component of 1, its weights (`[frame][target]`) scaled back
+/// so the offsets are unchanged: a weight is then the target's largest displacement (m) at that
+/// frame. With `grid`, the targets are rounded to the SHORT normalized grid `k / 32767`, as a
+/// glTF under KHR_mesh_quantization stores them.
+pub fn unit_targets(targets: &mut [Vec<[f32; 3]>], weights: &mut [Vec<f32>], grid: bool) {
+    for (k, target) in targets.iter_mut().enumerate() {
+        let scale = target.iter().flatten().fold(0.0f32, |m, v| m.max(v.abs()));
+        if scale == 0.0 {
+            continue;
+        }
+        for v in target.iter_mut().flatten() {
+            *v /= scale;
+            if grid {
+                *v = (*v * SHORT_STEPS).round() / SHORT_STEPS;
             }
         }
-        base
+        weights.iter_mut().for_each(|w| w[k] *= scale);
     }
+}
+
+/// Shifts each target's weights (`[frame][target]`) to start at 0 over the frames and returns
+/// the rest-space offset `Σ_k min_k S_k` the base mesh takes on instead (the offsets are
+/// unchanged). Readers clamp morph weights: Blender's glTF importer holds shape-key values
+/// inside slider ranges that do not reach below 0 (a negative weight is lost), Godot clamps
+/// to [-1, 1]; unit targets with weights from 0 play in both.
+pub fn weights_from_zero(targets: &[Vec<[f32; 3]>], weights: &mut [Vec<f32>]) -> Vec<[f32; 3]> {
+    let n = targets.first().map_or(0, Vec::len);
+    let mut base = vec![[0.0f32; 3]; n];
+    for (k, target) in targets.iter().enumerate() {
+        let lowest = weights.iter().map(|w| w[k]).fold(f32::INFINITY, f32::min);
+        if !lowest.is_finite() {
+            continue;
+        }
+        weights.iter_mut().for_each(|w| w[k] -= lowest);
+        for (b, t) in base.iter_mut().zip(target) {
+            (0..3).for_each(|a| b[a] += lowest * t[a]);
+        }
+    }
+    base
 }
 
 /// Rest-space offsets `Σ_k c_fk S_k` of every frame as a 3N × frames matrix, one contiguous

@@ -2,7 +2,9 @@
 //! `LBS(T + Σ w_k B_k, θ, W)` exactly like the network, with `B` the (compressed) basis and `w`
 //! the MLP output projected on it, one weight track per clip.
 
-use super::compress::{offset_matrix, spectrum, spectrum_of, UsedOffsets};
+use super::compress::{
+    offset_matrix, spectrum, spectrum_of, unit_targets, weights_from_zero, UsedOffsets,
+};
 use super::{animation_asset, skeleton_asset, skinned_mesh_asset, BODY_COLOR};
 use crate::models::file::ModelFile;
 use crate::models::pbns::flat;
@@ -119,7 +121,7 @@ pub fn bake(
         .iter()
         .filter(|&&s| s > 1e-6 * top)
         .count();
-    let (targets, weights) = match opts.targets {
+    let (mut targets, mut weights) = match opts.targets {
         Targets::Full if !pruned => (basis.clone(), all.clone()),
         Targets::Full => {
             let c = spectrum.truncate(&reference, used_rank);
@@ -134,7 +136,15 @@ pub fn bake(
             (c.targets, c.weights)
         }
     };
-    let mut garment = skinned_mesh_asset("garment", &model.garment, None, &skin, GARMENT_COLOR);
+    // Unit targets with weights from 0 (the rest moves into the base mesh): the same offsets,
+    // and readers that clamp weights (Blender, Godot) play them too.
+    unit_targets(&mut targets, &mut weights, false);
+    let shift = weights_from_zero(&targets, &mut weights);
+    let mut base = model.garment.clone();
+    for (p, d) in base.positions.iter_mut().zip(&shift) {
+        (0..3).for_each(|a| p[a] += d[a]);
+    }
+    let mut garment = skinned_mesh_asset("garment", &base, None, &skin, GARMENT_COLOR);
     garment.blend_shapes = targets
         .iter()
         .enumerate()
@@ -182,7 +192,7 @@ pub fn bake(
             let uncorrected = Replay::new(&basis, x, &skin);
             replay_error(
                 model.skeleton(),
-                &model.garment.positions,
+                (&model.garment.positions, &model.garment.positions),
                 clip,
                 &network,
                 &uncorrected,
@@ -191,7 +201,7 @@ pub fn bake(
         });
         let mut error = replay_error(
             model.skeleton(),
-            &model.garment.positions,
+            (&model.garment.positions, &base.positions),
             clip,
             &network,
             &baked,
@@ -300,10 +310,12 @@ impl<'a> Replay<'a> {
     }
 }
 
-/// World-space distance between the baked replay and the network, every frame of a clip.
+/// World-space distance between the baked replay and the network, every frame of a clip; each
+/// plays its offsets on its own rest (network, baked): the bake's base mesh holds the part of the
+/// offsets its weights no longer carry.
 fn replay_error(
     skeleton: &Skeleton,
-    rest: &[[f32; 3]],
+    (rest, baked_rest): (&[[f32; 3]], &[[f32; 3]]),
     clip: &SkelAnimation,
     network: &Replay,
     baked: &Replay,
@@ -315,7 +327,7 @@ fn replay_error(
             let skinning = skeleton.skinning_matrices(&clip.local_pose(f));
             let (net, out) = (
                 network.frame(rest, f, &skinning),
-                baked.frame(rest, f, &skinning),
+                baked.frame(baked_rest, f, &skinning),
             );
             let d: Vec<f32> = net.iter().zip(&out).map(|(a, b)| dist(a, b)).collect();
             (
