@@ -24,6 +24,9 @@ pub type Accessors = Vec<Result<Values, String>>;
 
 /// Runs every rule; returns the accessors' data for later checks (replay) when the references
 /// themselves are sound.
+/// A component type and whether it is normalized.
+type Format = (C, bool);
+
 /// Extensions beyond gltf-json's own whose rules these checks know: KHR_mesh_quantization's
 /// integer morph-target deltas.
 const CHECKED_EXTENSIONS: [&str; 1] = ["KHR_mesh_quantization"];
@@ -227,6 +230,43 @@ impl Rules<'_> {
             .is_some_and(|a| a.min.is_some() && a.max.is_some())
     }
 
+    /// The formats a vertex attribute (`morph`: a morph target's) may take: core glTF's, widened
+    /// by KHR_mesh_quantization's tables when the file uses it (integer positions and texture
+    /// coordinates, normalized byte/short normals and tangents, byte/short deltas).
+    fn formats(&self, name: &str, morph: bool) -> Vec<(C, bool, T)> {
+        let all_ints = [
+            (C::I8, false),
+            (C::I8, true),
+            (C::U8, false),
+            (C::U8, true),
+            (C::I16, false),
+            (C::I16, true),
+            (C::U16, false),
+            (C::U16, true),
+        ];
+        let signed_ints = [
+            (C::I8, false),
+            (C::I8, true),
+            (C::I16, false),
+            (C::I16, true),
+        ];
+        let signed_normalized = [(C::I8, true), (C::I16, true)];
+        let (type_, core, quantized): (T, &[Format], &[Format]) = match (name, morph) {
+            ("POSITION", false) => (T::Vec3, &[], &all_ints),
+            ("POSITION", true) => (T::Vec3, &[], &signed_ints),
+            ("TANGENT", false) => (T::Vec4, &[], &signed_normalized),
+            ("NORMAL" | "TANGENT", _) => (T::Vec3, &[], &signed_normalized),
+            // TEXCOORD: normalized unsigned bytes and shorts are core glTF.
+            _ => (T::Vec2, &[(C::U8, true), (C::U16, true)], &all_ints),
+        };
+        let extra = if self.quantized { quantized } else { &[] };
+        std::iter::once((C::F32, false))
+            .chain(core.iter().copied())
+            .chain(extra.iter().copied().filter(|f| !core.contains(f)))
+            .map(|(c, n)| (c, n, type_))
+            .collect()
+    }
+
     /// glTF 2.0 §3.6.2.4: every vertex attribute element starts on a 4-byte boundary (its
     /// offset and its stride multiples of 4), e.g. a SHORT VEC3 needs a stride of 8.
     fn vertex_aligned(&self, at: &str, index: json::Index<json::Accessor>, p: &mut Problems) {
@@ -289,7 +329,6 @@ impl Rules<'_> {
 
     fn primitive(&self, at: &str, prim: &json::mesh::Primitive, p: &mut Problems) {
         use json::mesh::Semantic as S;
-        let f = (C::F32, false, T::Vec3);
         let mut count = None;
         let mut sets = (0, 0);
         for (semantic, &index) in &prim.attributes {
@@ -301,25 +340,31 @@ impl Rules<'_> {
                     if !self.has_bounds(index) {
                         p.error(&here, "POSITION accessor needs min and max");
                     }
-                    self.format(&here, "POSITION", index, &[f], p)
+                    self.format(
+                        &here,
+                        "POSITION",
+                        index,
+                        &self.formats("POSITION", false),
+                        p,
+                    )
                 }
                 S::Normals => {
-                    let v = self.format(&here, "NORMAL", index, &[f], p);
-                    if let Some(v) = v {
+                    let v = self.format(&here, "NORMAL", index, &self.formats("NORMAL", false), p);
+                    // Quantized normals are not unit length by construction (the extension
+                    // leaves normalising to the reader), as Khronos does not check them.
+                    if let Some(v) = v.filter(|v| v.component == C::F32) {
                         unit_vectors(&here, v, p);
                     }
                     v
                 }
-                S::Tangents => self.format(&here, "TANGENT", index, &[(C::F32, false, T::Vec4)], p),
+                S::Tangents => {
+                    self.format(&here, "TANGENT", index, &self.formats("TANGENT", false), p)
+                }
                 S::TexCoords(_) => self.format(
                     &here,
                     "TEXCOORD",
                     index,
-                    &[
-                        (C::F32, false, T::Vec2),
-                        (C::U8, true, T::Vec2),
-                        (C::U16, true, T::Vec2),
-                    ],
+                    &self.formats("TEXCOORD", false),
                     p,
                 ),
                 S::Colors(_) => self.format(
@@ -407,17 +452,8 @@ impl Rules<'_> {
                 if name == "POSITION" && !self.has_bounds(index) {
                     p.error(&here, "morph target POSITION accessor needs min and max");
                 }
-                // Integer deltas are KHR_mesh_quantization's; core glTF has floats only.
-                let allowed = if self.quantized {
-                    &[
-                        (C::F32, false, T::Vec3),
-                        (C::I8, true, T::Vec3),
-                        (C::I16, true, T::Vec3),
-                    ][..]
-                } else {
-                    &[(C::F32, false, T::Vec3)][..]
-                };
-                if let Some(v) = self.format(&here, name, index, allowed, p) {
+                let allowed = self.formats(name, true);
+                if let Some(v) = self.format(&here, name, index, &allowed, p) {
                     if v.count() != vertices {
                         p.error(
                             &here,
