@@ -34,6 +34,16 @@ pub fn animation_asset(anim: &SkelAnimation) -> asset::SkelAnimation {
     }
 }
 
+/// `mesh` with each vertex moved by `offsets` (rest space): the base a bake whose blend-shape
+/// weights start at 0 plays its targets on.
+pub fn moved_by(mesh: &TriMesh, offsets: &[[f32; 3]]) -> TriMesh {
+    let mut moved = mesh.clone();
+    for (p, d) in moved.positions.iter_mut().zip(offsets) {
+        (0..3).for_each(|a| p[a] += d[a]);
+    }
+    moved
+}
+
 /// A skinned mesh, split at UV seams (glTF needs one UV per vertex); normals from the welded mesh
 /// so seams stay invisible.
 /// `normals`: per-vertex normals to keep (e.g. read from a file), else computed.

@@ -5,7 +5,7 @@
 use super::compress::{
     offset_matrix, spectrum, spectrum_of, unit_targets, weights_from_zero, UsedOffsets,
 };
-use super::{animation_asset, skeleton_asset, skinned_mesh_asset, BODY_COLOR};
+use super::{animation_asset, moved_by, skeleton_asset, skinned_mesh_asset, BODY_COLOR};
 use crate::models::file::ModelFile;
 use crate::models::pbns::flat;
 use crate::models::{predict_chunks, Pbns};
@@ -139,11 +139,7 @@ pub fn bake(
     // Unit targets with weights from 0 (the rest moves into the base mesh): the same offsets,
     // and readers that clamp weights (Blender, Godot) play them too.
     unit_targets(&mut targets, &mut weights, false);
-    let shift = weights_from_zero(&targets, &mut weights);
-    let mut base = model.garment.clone();
-    for (p, d) in base.positions.iter_mut().zip(&shift) {
-        (0..3).for_each(|a| p[a] += d[a]);
-    }
+    let base = moved_by(&model.garment, &weights_from_zero(&targets, &mut weights));
     let mut garment = skinned_mesh_asset("garment", &base, None, &skin, GARMENT_COLOR);
     garment.blend_shapes = targets
         .iter()

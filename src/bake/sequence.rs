@@ -8,7 +8,7 @@
 
 use super::compress::spectrum_of;
 use super::pbns::GARMENT_COLOR;
-use super::{animation_asset, skeleton_asset, skinned_mesh_asset};
+use super::{animation_asset, moved_by, skeleton_asset, skinned_mesh_asset};
 use crate::geometry::TriMesh;
 use crate::rig::{SkelAnimation, Skeleton, Skin};
 use anyhow::{bail, Result};
@@ -53,11 +53,7 @@ pub fn bake_sequence(
     // tolerance bounds the world-space one; the world error is measured below all the same.
     let mut kept = spectrum.within_normalized(&residuals, tolerance, quantize);
     // Weights from 0 up (the base mesh takes the rest): readers that clamp them play it too.
-    let shift = kept.weights_from_zero();
-    let mut base = garment.clone();
-    for (p, d) in base.positions.iter_mut().zip(&shift) {
-        (0..3).for_each(|a| p[a] += d[a]);
-    }
+    let base = moved_by(garment, &kept.weights_from_zero());
     let (max_error_m, mean_error_m) = world_error(
         &base.positions,
         &blended,
