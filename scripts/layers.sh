@@ -18,7 +18,7 @@ LAYERS = [
     "metrics",
     "models",
     "train eval simulate rollout interpolate",
-    "bake",
+    "bake compare",
     "validate",
     "batch",
     "cli",

@@ -13,7 +13,8 @@
 //! 7. `models` — the networks and the model file
 //! 8. `train`, `eval`, `simulate`, `rollout` — training; evaluation over clips; cloth-simulated
 //!    ground truth; dynamic models rolled out frame by frame
-//! 9. `bake` — model output → the exporter-neutral baked asset (`exporters::asset`)
+//! 9. `bake`, `compare` — model output → the exporter-neutral baked asset (`exporters::asset`);
+//!    caches against perturbed simulations (spread, own error, e(k), the hem's swing)
 //! 10. `validate` — files checked: structure, and replay against the model
 //! 11. `batch` — manifests expanded into keyed jobs (command lines), run here or on Ray
 //! 12. `cli` — one command per pipeline step
@@ -22,6 +23,7 @@ pub mod bake;
 pub mod batch;
 pub mod body;
 pub mod cli;
+pub mod compare;
 pub mod compute;
 pub mod eval;
 pub mod fabric;

@@ -168,6 +168,7 @@ impl RolloutBench {
         let settings = simulate::Settings {
             settle_s: simulate::SETTLE_S,
             blend_s: simulate::BLEND_S,
+            perturb: 0,
             frames: Some(poses.len()),
             speed_limit: simulate::SPEED_LIMIT,
             blender: simulate::blender::find(None)?,

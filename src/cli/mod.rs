@@ -4,6 +4,7 @@ pub mod args;
 pub mod bake;
 pub mod batch;
 pub mod bench;
+pub mod compare;
 pub mod eval;
 pub mod inspect;
 pub mod interpolate;
@@ -75,6 +76,7 @@ enum Command {
     Simulate(simulate::Args),
     TrainDynamic(train_dynamic::Args),
     Rollout(rollout::Args),
+    Compare(compare::Args),
     Interpolate(interpolate::Args),
     Bench(bench::Args),
     Batch(batch::Args),
@@ -95,6 +97,7 @@ pub fn main() -> i32 {
         Command::Simulate(a) => run(&a, a.output.json),
         Command::TrainDynamic(a) => run(&a, a.output.json),
         Command::Rollout(a) => run(&a, a.output.json),
+        Command::Compare(a) => run(&a, a.output.json),
         Command::Interpolate(a) => run(&a, a.output.json),
         Command::Bench(a) => run(&a, a.json()),
         Command::Batch(a) => run(&a, a.json()),

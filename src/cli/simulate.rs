@@ -56,6 +56,11 @@ pub struct Args {
     /// Seconds of blending from the rest pose into the clip's first pose.
     #[arg(long, default_value_t = simulate::BLEND_S)]
     pub blend: f32,
+    /// Run N of a perturbed ensemble (for `compare`): the rest hold before the blend lasts
+    /// N × 0.1 s longer, so runs 0, 1, 2 … are independent draws of a chaotic garment on the
+    /// same clip. 0 is the plain simulation; each N has its own cache entry.
+    #[arg(long, default_value_t = 0)]
+    pub perturb: u32,
     /// Stop with an error when a vertex moves faster than this (m/s): the solver exploded.
     #[arg(long, default_value_t = simulate::SPEED_LIMIT)]
     pub speed_limit: f32,
@@ -85,6 +90,8 @@ pub struct Report {
     pub garment_vertices: usize,
     pub pinned: usize,
     pub lead_in_frames: usize,
+    /// The run of a perturbed ensemble (`--perturb`).
+    pub perturb: u32,
     pub blender_version: String,
     /// Solver seconds per simulated frame (lead-in included), from when it was simulated.
     pub seconds_per_frame: f64,
@@ -106,6 +113,7 @@ impl Args {
         Ok(Settings {
             settle_s: self.settle,
             blend_s: self.blend,
+            perturb: self.perturb,
             frames: self.frames,
             speed_limit: self.speed_limit,
             blender: self.blender.clone().unwrap_or_default(),
@@ -170,6 +178,7 @@ impl Execute for Args {
             garment_vertices: garment.mesh.vertex_count(),
             pinned: simulate::blender::pinned(&scene).len(),
             lead_in_frames: e.lead_in,
+            perturb: self.perturb,
             blender_version: e.blender_version,
             seconds_per_frame: e.seconds / e.simulated_frames.max(1) as f64,
             cached: outcome.cached,
@@ -199,11 +208,16 @@ impl Execute for Args {
             "simulated"
         };
         println!(
-            "{how}: {:.3} s/frame over {} lead-in + {} clip frames (key {})",
+            "{how}: {:.3} s/frame over {} lead-in + {} clip frames (key {}){}",
             r.seconds_per_frame,
             r.lead_in_frames,
             r.frames,
-            &r.cache_key[..12]
+            &r.cache_key[..12],
+            if r.perturb > 0 {
+                format!(", perturbed run {}", r.perturb)
+            } else {
+                String::new()
+            }
         );
         println!(
             "inside the body (winding number): {:.3} % of vertices on average, worst frame {} ({} vertices), depth p99 {:.1} mm, max {:.1} mm",

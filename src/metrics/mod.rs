@@ -1,7 +1,8 @@
 //! Garment metrics of posed frames against the posed body: edge error and strain, bending,
 //! collided vertices (split at body self-overlap), gravity energy. Plain arrays on the CPU,
 //! exact nearest neighbours: shared by training validation, `eval` and the exporters' checks.
-//! `versus`: a played garment against simulated reference caches.
+//! `versus`: a played garment against simulated reference caches; `ensemble`, `hem`,
+//! `plausibility`: what `compare` measures of caches against perturbed simulations.
 
 use crate::body::{Body, PosedBody};
 use crate::fabric::GRAVITY;
@@ -9,6 +10,9 @@ use crate::geometry::{face_normals, PointIndex, SurfaceIndex, Topology, TriMesh}
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+pub mod ensemble;
+pub mod hem;
+pub mod plausibility;
 pub mod versus;
 
 /// The PBNS metrics, averaged over frames.

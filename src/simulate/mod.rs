@@ -36,6 +36,11 @@ pub struct Settings {
     /// Seconds the garment settles on the body at rest, then seconds of blending into frame 0.
     pub settle_s: f32,
     pub blend_s: f32,
+    /// Run N of a perturbed ensemble of the clip: the rest hold lasts N × `PERTURB_S` longer
+    /// (at least one frame per step), so runs differ only by where the chaotic garment is when
+    /// the clip starts. 0: the plain simulation. The hold's length is in the job Blender gets,
+    /// so each run has its own cache key.
+    pub perturb: u32,
     /// Simulate only the clip's first frames (tests, previews).
     pub frames: Option<usize>,
     /// A vertex faster than this (m/s) means the solver exploded.
@@ -50,6 +55,9 @@ pub struct Settings {
 pub const SETTLE_S: f32 = 0.5;
 pub const BLEND_S: f32 = 1.0;
 pub const SPEED_LIMIT: f32 = 30.0;
+/// Each perturbation step lengthens the rest hold by this (s): stop 28's runs 0.1 s apart were
+/// 2–3 mm apart at frame 0 and 30–37 mm over 131_02, independent draws of the skirt's chaos.
+pub const PERTURB_S: f32 = 0.1;
 
 /// The poses and meshes handed to the solver: lead-in and clip, body and pin targets.
 pub struct Prepared {
@@ -72,10 +80,11 @@ pub fn prepare(scene: &Scene, settings: &Settings) -> Result<Prepared> {
     }
     let skeleton = &scene.body.skeleton;
     let frames_for = |s: f32| (s * clip.fps).round() as usize;
+    let perturb = frames_for(PERTURB_S).max(1) * settings.perturb as usize;
     let mut poses = lead_in::poses(
         skeleton,
         &clip.local_pose(0),
-        frames_for(settings.settle_s),
+        frames_for(settings.settle_s) + perturb,
         frames_for(settings.blend_s),
     );
     let lead_in = poses.len();

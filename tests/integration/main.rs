@@ -5,6 +5,7 @@ mod common;
 
 mod bake;
 mod batch;
+mod compare;
 mod dynamic;
 mod errors;
 mod metrics;

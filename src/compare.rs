@@ -1,0 +1,464 @@
+//! Caches of one clip (a dynamic roll-out, PBNS, plain LBS, another simulation) against an
+//! ensemble of perturbed simulations of it, measured so that dynamics show: RMS errors beside
+//! the simulations' spread σ and each cache's own error b (metrics::ensemble), error against
+//! horizon from restarts, e(k), beside the simulations' own divergence, the hem's swing beyond a
+//! quasi-static baseline (metrics::hem), and whether it could be cloth (strain, inside the body,
+//! jitter). Whole-clip L2 against one run of a chaotic simulation is won by a blurred average;
+//! here the blur shows as b below σ with a hem amplitude ratio below 1.
+
+use crate::body::Body;
+use crate::geometry::TriMesh;
+use crate::metrics::ensemble::{Divergence, Ensemble, Score, Spread};
+use crate::metrics::hem::{self, Lag, SpectrumSummary, Trace};
+use crate::metrics::plausibility::{self, Plausibility};
+use crate::models::file::ModelFile;
+use crate::preview::plot::{line_chart, stack, Chart, Line, LINE_COLORS};
+use crate::rig::JointTransform;
+use crate::rollout::{for_model, Init};
+use crate::simulate::stats::{self, Series};
+use anyhow::{bail, Result};
+use nalgebra::Matrix4;
+use serde::Serialize;
+use std::path::PathBuf;
+
+/// One cache compared: its frames (the clip's, frame 0 its start) and, for a dynamic model, the
+/// model that played it, which e(k) restarts from each simulation's state.
+pub struct Cache {
+    pub name: String,
+    pub frames: Vec<Vec<[f32; 3]>>,
+    pub model: Option<ModelFile>,
+}
+
+/// What is compared.
+pub struct Inputs<'a> {
+    pub body: &'a Body,
+    pub garment: &'a TriMesh,
+    /// The clip's poses on the body's skeleton, one per frame.
+    pub poses: &'a [Vec<JointTransform>],
+    pub fps: f32,
+    /// Two or more simulations of the clip (three or more for a ceiling worth the name).
+    pub simulations: &'a [Vec<Vec<[f32; 3]>>],
+    pub caches: &'a [Cache],
+    /// The quasi-static cache the hem's swing is measured beyond (PBNS), by index.
+    pub baseline: Option<usize>,
+}
+
+/// How it is compared.
+#[derive(Clone, Debug)]
+pub struct Settings {
+    /// e(k) for k = 1 … horizon.
+    pub horizon: usize,
+    /// Restarts at frames 0, every, 2·every, … (whole horizons only).
+    pub restart_every: usize,
+    /// The lag is looked for within ± this (s).
+    pub max_lag_s: f32,
+    /// How a restarted dynamic model plays (the collision fix as `rollout`'s).
+    pub rollout: crate::rollout::Settings,
+    /// Where to draw e(k) and the hem traces (PNG).
+    pub horizon_png: Option<PathBuf>,
+    pub hem_png: Option<PathBuf>,
+    pub quiet: bool,
+}
+
+/// The hem's swing of one garment sequence.
+#[derive(Clone, Debug, Serialize)]
+pub struct Swing {
+    /// RMS of the residual (mm).
+    pub amplitude_mm: f64,
+    /// Lag of the hem's centroid behind the pelvis' velocity.
+    pub lag: Option<Lag>,
+    pub spectrum: SpectrumSummary,
+}
+
+/// A cache's hem against the simulations'.
+#[derive(Clone, Debug, Serialize)]
+pub struct HemScore {
+    pub swing: Swing,
+    /// Correlation with the simulations' mean residual (the figure).
+    pub correlation_with_mean: Option<f64>,
+    /// Mean correlation with each simulation: one garment against one run, comparable with
+    /// the simulations' mutual correlation (the ceiling).
+    pub correlation_with_each: Option<f64>,
+    /// Amplitude over the simulations' (mean over runs): 1 for a garment that swings as they
+    /// do, below 1 for a blur, 0 for the baseline.
+    pub amplitude_ratio: f64,
+}
+
+/// The simulations' own hem figures: the ceiling and the targets.
+#[derive(Clone, Debug, Serialize)]
+pub struct HemEnsemble {
+    /// Hem vertices (the lowest boundary loop).
+    pub vertices: usize,
+    /// The cache the swing is measured beyond (`None`: the hem in the waist frame as it is).
+    pub baseline: Option<String>,
+    /// Mean correlation over pairs of runs: the ceiling of `correlation_with_each`.
+    pub mutual_correlation: Option<f64>,
+    /// Each run against the mean of the others, averaged (n − 1 runs in that mean, so a
+    /// garment drawn like the runs scores a little higher against the mean of all n).
+    pub correlation_with_the_others: Option<f64>,
+    /// Each run's swing; the spectrum of their mean power.
+    pub runs: Vec<Swing>,
+    pub amplitude_mm: f64,
+    pub spectrum: Vec<hem::Bin>,
+}
+
+/// One cache's figures.
+#[derive(Clone, Debug, Serialize)]
+pub struct CacheReport {
+    pub name: String,
+    pub score: Score,
+    /// e(k), k = 1 … horizon (mm RMS, pooled over runs and restarts).
+    pub horizon_mm: Vec<f64>,
+    /// Whether e(k) restarted the model from each run's state (else the cache's own frames).
+    pub restarted: bool,
+    pub hem: HemScore,
+    pub spectrum: Vec<hem::Bin>,
+    pub plausibility: Plausibility,
+    /// Vertices inside the posed body (winding number), mean over frames (%).
+    pub inside_pct: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Report {
+    pub frames: usize,
+    pub fps: f32,
+    pub spread: Spread,
+    pub horizon: usize,
+    pub starts: Vec<usize>,
+    pub divergence: Divergence,
+    pub hem: HemEnsemble,
+    /// The simulations' own plausibility (mean over runs) and inside share.
+    pub simulations: Plausibility,
+    pub simulations_inside_pct: f64,
+    pub caches: Vec<CacheReport>,
+    pub horizon_png: Option<PathBuf>,
+    pub hem_png: Option<PathBuf>,
+}
+
+/// Everything above; plots written when asked (atomically).
+pub fn compare(inputs: &Inputs, settings: &Settings) -> Result<Report> {
+    let frames = inputs.poses.len();
+    let Some(ensemble) = Ensemble::new(inputs.simulations) else {
+        bail!("compare needs two or more simulations of the clip (three or more for a ceiling)");
+    };
+    if ensemble.frames() != frames || inputs.caches.iter().any(|c| c.frames.len() != frames) {
+        bail!("every simulation and cache must have the clip's {frames} frames");
+    }
+    if settings.horizon == 0 || settings.horizon >= frames {
+        bail!(
+            "horizon {}: give 1 to {} frames (the clip's frames − 1)",
+            settings.horizon,
+            frames - 1
+        );
+    }
+    let starts = ensemble.starts(settings.horizon, settings.restart_every);
+    let k = settings.horizon;
+    let waist: Vec<Matrix4<f32>> = inputs
+        .poses
+        .iter()
+        .map(|p| inputs.body.skeleton.skinning_matrices(p)[0])
+        .collect();
+    let Some(hem_loop) = hem::hem_loop(inputs.garment) else {
+        bail!("the garment has no boundary loop: no hem to follow");
+    };
+    let hem_of = |f: &[Vec<[f32; 3]>]| hem::in_waist_frame(f, &hem_loop, &waist);
+    let baseline = inputs.baseline.map(|b| hem_of(&inputs.caches[b].frames));
+    let residual = |f: &[Vec<[f32; 3]>]| hem::residual(&hem_of(f), baseline.as_ref());
+    let velocity = hem::pelvis_velocity(&waist, inputs.fps);
+    let max_lag = (settings.max_lag_s * inputs.fps).round() as usize;
+    let swing = |r: &Trace| Swing {
+        amplitude_mm: hem::amplitude_mm(r),
+        lag: hem::lag(&hem::centroid(r), &velocity, max_lag, inputs.fps),
+        spectrum: hem::summarise(&hem::power_spectrum(r, inputs.fps)),
+    };
+    let runs: Vec<Trace> = inputs.simulations.iter().map(|s| residual(s)).collect();
+    let run_refs: Vec<&Trace> = runs.iter().collect();
+    let runs_mean = hem::mean_trace(&run_refs);
+    let n = runs.len();
+    let mean_of = |v: Vec<Option<f64>>| {
+        let v: Vec<f64> = v.into_iter().flatten().collect();
+        (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+    };
+    let mutual = mean_of(
+        (0..n)
+            .flat_map(|i| (i + 1..n).map(move |j| (i, j)))
+            .map(|(i, j)| hem::correlation(&runs[i], &runs[j]))
+            .collect(),
+    );
+    let with_others = mean_of(
+        (0..n)
+            .map(|i| {
+                let others: Vec<&Trace> = (0..n).filter(|&j| j != i).map(|j| &runs[j]).collect();
+                hem::correlation(&runs[i], &hem::mean_trace(&others))
+            })
+            .collect(),
+    );
+    let run_spectra: Vec<Vec<hem::Bin>> = runs
+        .iter()
+        .map(|r| hem::power_spectrum(r, inputs.fps))
+        .collect();
+    let sims_spectrum: Vec<hem::Bin> = (0..run_spectra[0].len())
+        .map(|b| hem::Bin {
+            hz: run_spectra[0][b].hz,
+            power_mm2: run_spectra.iter().map(|s| s[b].power_mm2).sum::<f64>() / n as f64,
+        })
+        .collect();
+    let run_swings: Vec<Swing> = runs.iter().map(swing).collect();
+    let sims_amplitude = run_swings.iter().map(|s| s.amplitude_mm).sum::<f64>() / n as f64;
+    let series = Series::unpinned(inputs.body, inputs.garment, inputs.fps);
+    let inside = |f: &[Vec<[f32; 3]>]| {
+        stats::of(&series, f, inputs.poses, &[], None)
+            .1
+            .inside
+            .inside_pct
+    };
+    let rest = &inputs.garment.positions;
+    let tri = &inputs.garment.triangles;
+    let sims_plaus: Vec<Plausibility> = inputs
+        .simulations
+        .iter()
+        .map(|s| plausibility::of(rest, tri, s))
+        .collect();
+    let mean_plaus = |f: fn(&Plausibility) -> f64| sims_plaus.iter().map(f).sum::<f64>() / n as f64;
+    let simulations = Plausibility {
+        strain_mean_pct: mean_plaus(|p| p.strain_mean_pct),
+        strain_p99_pct: mean_plaus(|p| p.strain_p99_pct),
+        jitter_mm: mean_plaus(|p| p.jitter_mm),
+    };
+    let simulations_inside_pct =
+        inputs.simulations.iter().map(|s| inside(s)).sum::<f64>() / n as f64;
+    let mut caches = Vec::new();
+    for cache in inputs.caches {
+        let horizon_mm = match &cache.model {
+            Some(model) => restarted_horizon(
+                model,
+                &ensemble,
+                inputs.poses,
+                &starts,
+                k,
+                settings,
+                &cache.name,
+            )?,
+            None => ensemble.horizon(&starts, k, |_, t0| {
+                Ok::<_, anyhow::Error>(cache.frames[t0..=t0 + k].to_vec())
+            })?,
+        };
+        let r = residual(&cache.frames);
+        let spectrum = hem::power_spectrum(&r, inputs.fps);
+        let hem_score = HemScore {
+            correlation_with_mean: hem::correlation(&r, &runs_mean),
+            correlation_with_each: mean_of(runs.iter().map(|s| hem::correlation(&r, s)).collect()),
+            amplitude_ratio: hem::amplitude_mm(&r) / sims_amplitude.max(1e-12),
+            swing: swing(&r),
+        };
+        caches.push(CacheReport {
+            name: cache.name.clone(),
+            score: ensemble.score(&cache.frames),
+            horizon_mm,
+            restarted: cache.model.is_some(),
+            hem: hem_score,
+            spectrum,
+            plausibility: plausibility::of(rest, tri, &cache.frames),
+            inside_pct: inside(&cache.frames),
+        });
+    }
+    let report = Report {
+        frames,
+        fps: inputs.fps,
+        spread: ensemble.spread(),
+        horizon: k,
+        divergence: ensemble.divergence(&starts, k),
+        starts,
+        hem: HemEnsemble {
+            vertices: hem_loop.len(),
+            baseline: inputs.baseline.map(|b| inputs.caches[b].name.clone()),
+            mutual_correlation: mutual,
+            correlation_with_the_others: with_others,
+            runs: run_swings,
+            amplitude_mm: sims_amplitude,
+            spectrum: sims_spectrum,
+        },
+        simulations,
+        simulations_inside_pct,
+        caches,
+        horizon_png: settings.horizon_png.clone(),
+        hem_png: settings.hem_png.clone(),
+    };
+    if let Some(path) = &settings.horizon_png {
+        crate::preview::save_png(&horizon_chart(&report), path)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    }
+    if let Some(path) = &settings.hem_png {
+        let mut traces: Vec<(String, Vec<f64>)> = runs
+            .iter()
+            .enumerate()
+            .map(|(i, r)| (format!("sim {i}"), forward(r)))
+            .collect();
+        traces.push(("sims mean".into(), forward(&runs_mean)));
+        for c in inputs.caches {
+            traces.push((c.name.clone(), forward(&residual(&c.frames))));
+        }
+        crate::preview::save_png(&hem_chart(&report, &traces, n), path)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    }
+    Ok(report)
+}
+
+/// e(k) of a dynamic model restarted from every run's state (its last three frames, so it
+/// starts moving as simulated) at each start, `horizon` frames each.
+fn restarted_horizon(
+    model: &ModelFile,
+    ensemble: &Ensemble,
+    poses: &[Vec<JointTransform>],
+    starts: &[usize],
+    horizon: usize,
+    settings: &Settings,
+    name: &str,
+) -> Result<Vec<f64>> {
+    let total = (ensemble.runs().len() * starts.len() * horizon) as u64;
+    let bar = crate::progress::bar(total, &format!("{name} e(k)"), settings.quiet);
+    let mut done = 0u64;
+    let curve = ensemble.horizon(starts, horizon, |i, t0| {
+        let run = &ensemble.runs()[i];
+        let init = Init::Moving(run[t0.saturating_sub(2)..=t0].to_vec());
+        let played = for_model(
+            model,
+            &poses[t0..=t0 + horizon],
+            &init,
+            settings.rollout.clone(),
+            &mut |f| bar.set_position(done + f as u64),
+        )?;
+        done += horizon as u64;
+        Ok::<_, anyhow::Error>(played.frames)
+    });
+    bar.finish_and_clear();
+    curve
+}
+
+/// The hem residual's centroid along the waist frame's forward axis (+z at rest), mm.
+fn forward(r: &Trace) -> Vec<f64> {
+    hem::centroid(r).iter().map(|p| 1e3 * p[2]).collect()
+}
+
+const SIM_GREY: [u8; 3] = [150, 150, 150];
+const BLACK: [u8; 3] = [20, 20, 20];
+
+fn horizon_chart(r: &Report) -> image::RgbImage {
+    let ks = |v: &[f64]| -> Vec<(f64, f64)> {
+        v.iter()
+            .enumerate()
+            .map(|(i, &y)| ((i + 1) as f64, y))
+            .collect()
+    };
+    let mut lines = vec![
+        Line {
+            label: "sims from a common start (frame 0)".into(),
+            points: ks(&r.divergence.from_the_start_mm),
+            color: BLACK,
+            width: 2,
+        },
+        Line {
+            label: "two runs at the same frames (sqrt2 sigma)".into(),
+            points: ks(&r.divergence.pairwise_mm),
+            color: SIM_GREY,
+            width: 2,
+        },
+        Line {
+            label: "sigma (where the mean of the runs sits)".into(),
+            points: ks(&r.divergence.sigma_mm),
+            color: [200, 200, 200],
+            width: 1,
+        },
+    ];
+    for (c, color) in r.caches.iter().zip(LINE_COLORS.iter().cycle()) {
+        lines.push(Line {
+            label: format!(
+                "{}{}",
+                c.name,
+                if c.restarted { " (restarted)" } else { "" }
+            ),
+            points: ks(&c.horizon_mm),
+            color: *color,
+            width: 2,
+        });
+    }
+    line_chart(
+        &Chart {
+            title: format!("error k frames after a restart ({} starts)", r.starts.len()),
+            x_label: "k (frames)".into(),
+            y_label: "RMS mm".into(),
+            lines,
+            y_from_zero: true,
+        },
+        900,
+        520,
+    )
+}
+
+fn hem_chart(r: &Report, traces: &[(String, Vec<f64>)], runs: usize) -> image::RgbImage {
+    let seconds = |v: &[f64]| -> Vec<(f64, f64)> {
+        v.iter()
+            .enumerate()
+            .map(|(t, &y)| (t as f64 / f64::from(r.fps), y))
+            .collect()
+    };
+    let mut colors = LINE_COLORS.iter().cycle();
+    let lines = traces
+        .iter()
+        .enumerate()
+        .map(|(i, (name, v))| Line {
+            label: name.clone(),
+            points: seconds(v),
+            color: match i {
+                i if i < runs => SIM_GREY,
+                i if i == runs => BLACK,
+                _ => *colors.next().unwrap_or(&BLACK),
+            },
+            width: if i < runs { 1 } else { 2 },
+        })
+        .collect();
+    let base = r.hem.baseline.as_deref().unwrap_or("none");
+    let traces = line_chart(
+        &Chart {
+            title: format!("hem forward swing in the waist frame beyond {base}"),
+            x_label: "time (s)".into(),
+            y_label: "mm".into(),
+            lines,
+            y_from_zero: false,
+        },
+        1100,
+        420,
+    );
+    let mut colors = LINE_COLORS.iter().cycle();
+    let power = |s: &[hem::Bin]| -> Vec<(f64, f64)> {
+        s.iter()
+            .skip(1)
+            .filter(|b| b.hz <= 5.0)
+            .map(|b| (b.hz, b.power_mm2))
+            .collect()
+    };
+    let mut lines = vec![Line {
+        label: "sims (mean power)".into(),
+        points: power(&r.hem.spectrum),
+        color: BLACK,
+        width: 2,
+    }];
+    lines.extend(r.caches.iter().map(|c| Line {
+        label: c.name.clone(),
+        points: power(&c.spectrum),
+        color: *colors.next().unwrap_or(&BLACK),
+        width: 2,
+    }));
+    let spectrum = line_chart(
+        &Chart {
+            title: "hem residual power spectrum (to 5 Hz)".into(),
+            x_label: "Hz".into(),
+            y_label: "mm2 per bin".into(),
+            lines,
+            y_from_zero: true,
+        },
+        1100,
+        360,
+    );
+    stack(&[traces, spectrum])
+}

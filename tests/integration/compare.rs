@@ -1,0 +1,234 @@
+//! `simulate --perturb` and `compare` on real data: four runs of the sample skirt on 131_01 whose
+//! rest holds differ by 0.1 s (12 frames, a short lead-in), three as the ensemble and the fourth
+//! as a cache beside the runs' mean garment (a blur) and one run itself. Checked against what
+//! the statistics must give on any data: the mean garment is √((n−1)/n) σ from a run and its own
+//! error is 0, a run compared with itself is 0 mm off, a baseline leaves no swing of its own; the
+//! plots are read back by the `image` crate; bad input is one error line with nothing written.
+
+use crate::common::*;
+use std::path::{Path, PathBuf};
+
+const FRAMES: &str = "12";
+
+/// Run `perturb` of the skirt on 131_01 (shared cache: simulated once per checkout).
+fn run(dir: &Path, perturb: u32) -> (PathBuf, serde_json::Value) {
+    let out = dir.join(format!("run{perturb}.pc2"));
+    let cache = root().join("target/test-out/sim-cache");
+    let p = perturb.to_string();
+    let report = garmentbake_json(&[
+        "simulate",
+        "--body",
+        "samples/body.glb",
+        "--garment",
+        "samples/garments/skirt.obj",
+        "--motion",
+        "samples/motions/131_01.bvh",
+        "--fps",
+        "30",
+        "--frames",
+        FRAMES,
+        "--settle",
+        "0.1",
+        "--blend",
+        "0.2",
+        "--perturb",
+        &p,
+        "--cache",
+        cache.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    (out, report)
+}
+
+fn read(path: &Path) -> Vec<Vec<[f32; 3]>> {
+    garmentbake::io::point_cache::read_pc2(path, 2808).unwrap()
+}
+
+fn write(path: &Path, frames: &[Vec<[f32; 3]>]) {
+    let cache = exporters::PointCache {
+        name: "blur".into(),
+        fps: 30.0,
+        triangles: Vec::new(),
+        uvs: None,
+        point_count: frames[0].len(),
+        points: frames.iter().flatten().copied().collect(),
+    };
+    exporters::pc2::write(path, &cache).unwrap();
+}
+
+fn compare_args<'a>(sims: &'a [String], extra: &[&'a str]) -> Vec<&'a str> {
+    let mut args = vec![
+        "compare",
+        "--body",
+        "samples/body.glb",
+        "--garment",
+        "samples/garments/skirt.obj",
+        "--motion",
+        "samples/motions/131_01.bvh",
+        "--fps",
+        "30",
+        "--frames",
+        FRAMES,
+        "--horizon",
+        "4",
+        "--restart-every",
+        "3",
+    ];
+    for s in sims {
+        args.extend_from_slice(&["--sim", s]);
+    }
+    args.extend_from_slice(extra);
+    args
+}
+
+fn f(v: &serde_json::Value) -> f64 {
+    v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
+}
+
+#[test]
+fn perturbed_runs_part_and_compare_tells_a_blur_from_a_run() {
+    let dir = out_dir("compare");
+    let runs: Vec<(PathBuf, serde_json::Value)> = (0..4).map(|p| run(&dir, p)).collect();
+    // --perturb N holds the rest pose N × 0.1 s (3 frames at 30 fps) longer: its own lead-in,
+    // its own cache entry, another garment — a few mm apart when the clip starts.
+    let lead = |r: &serde_json::Value| r["lead_in_frames"].as_u64().unwrap();
+    assert_eq!(lead(&runs[1].1), lead(&runs[0].1) + 3);
+    assert_eq!(lead(&runs[3].1), lead(&runs[0].1) + 9);
+    assert_ne!(runs[0].1["cache_key"], runs[1].1["cache_key"]);
+    let frames: Vec<_> = runs.iter().map(|r| read(&r.0)).collect();
+    let apart = max_distance(&frames[0][0], &frames[1][0]);
+    // Measured: 2.4 mm at frame 0.
+    assert!(
+        apart > 1e-4 && apart < 0.05,
+        "runs 0 and 1 at frame 0: {apart} m apart"
+    );
+
+    // The runs' mean garment (a blur no run shows) and the fourth run as caches.
+    let n = frames[0][0].len();
+    let mean: Vec<Vec<[f32; 3]>> = (0..frames[0].len())
+        .map(|t| {
+            (0..n)
+                .map(|v| {
+                    std::array::from_fn(|k| (0..3).map(|r| frames[r][t][v][k]).sum::<f32>() / 3.0)
+                })
+                .collect()
+        })
+        .collect();
+    let blur = dir.join("blur.pc2");
+    write(&blur, &mean);
+    let sims: Vec<String> = runs[..3]
+        .iter()
+        .map(|r| r.0.display().to_string())
+        .collect();
+    let (horizon_png, hem_png) = (dir.join("horizon.png"), dir.join("hem.png"));
+    let caches = [
+        format!("blur={}", blur.display()),
+        format!("rerun={}", runs[3].0.display()),
+        format!("run0={}", runs[0].0.display()),
+    ];
+    let mut extra: Vec<&str> = caches
+        .iter()
+        .flat_map(|c| ["--cache", c.as_str()])
+        .collect();
+    let (hp, mp) = (horizon_png.to_str().unwrap(), hem_png.to_str().unwrap());
+    extra.extend_from_slice(&[
+        "--baseline",
+        "rerun",
+        "--plot-horizon",
+        hp,
+        "--plot-hem",
+        mp,
+        "--json",
+    ]);
+    let r = garmentbake_json(&compare_args(&sims, &extra));
+
+    let sigma = f(&r["spread"]["sigma_mm"]["clip"]);
+    assert!(sigma > 0.1, "{}", r["spread"]);
+    let cache = |name: &str| {
+        r["caches"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|c| c["name"] == name)
+            .unwrap_or_else(|| panic!("no cache {name}"))
+            .clone()
+    };
+    let (b, rerun, run0) = (cache("blur"), cache("rerun"), cache("run0"));
+    // The mean of n runs is √((n − 1)/n) σ from a run on average (an identity), its own error
+    // is 0 (clamped from −σ²/n) and it is its own mean garment.
+    let want = sigma * (2.0f64 / 3.0).sqrt();
+    let got = f(&b["score"]["rms_mm"]["clip"]);
+    assert!(
+        (got / want - 1.0).abs() < 1e-3,
+        "blur {got} mm, want {want}"
+    );
+    assert_eq!(f(&b["score"]["own_mm"]["clip"]), 0.0);
+    assert!(f(&b["score"]["versus_mean_rms_mm"]["clip"]) < 1e-3);
+    // A run compared with itself; another run has an error of its own.
+    assert_eq!(f(&run0["score"]["each_rms_mm"][0]["clip"]), 0.0);
+    assert!(
+        f(&rerun["score"]["own_mm"]["clip"]) > 0.0,
+        "{}",
+        rerun["score"]
+    );
+    // e(k) for k = 1 … 4 from restarts at frames 0, 3, 6 (whole horizons in 12 frames).
+    assert_eq!(r["starts"], serde_json::json!([0, 3, 6]));
+    for c in [&b, &rerun, &run0] {
+        let e = c["horizon_mm"].as_array().unwrap();
+        assert_eq!(e.len(), 4);
+        assert!(e.iter().all(|x| f(x).is_finite()), "{e:?}");
+        assert_eq!(c["restarted"], false);
+    }
+    // The hem: the skirt's lowest loop; measured beyond the rerun, which then has no swing of
+    // its own and no correlation; the blur never swings more than the runs on average.
+    assert!(r["hem"]["vertices"].as_u64().unwrap() >= 40, "{}", r["hem"]);
+    assert_eq!(r["hem"]["baseline"], "rerun");
+    assert_eq!(f(&rerun["hem"]["amplitude_ratio"]), 0.0);
+    assert!(rerun["hem"]["correlation_with_mean"].is_null());
+    let ratio = f(&b["hem"]["amplitude_ratio"]);
+    assert!(
+        ratio > 0.0 && ratio <= 1.0 + 1e-9,
+        "blur amplitude ratio {ratio}"
+    );
+    let corr = f(&b["hem"]["correlation_with_mean"]);
+    assert!(
+        (corr - 1.0).abs() < 1e-6,
+        "the blur is the runs' mean: {corr}"
+    );
+    // Plausibility: the runs and the caches on the body.
+    assert!(
+        f(&run0["plausibility"]["strain_p99_pct"]) >= f(&run0["plausibility"]["strain_mean_pct"])
+    );
+    assert!(f(&run0["plausibility"]["jitter_mm"]) > 0.0);
+
+    // The plots, read back by the `image` crate: sizes, and each cache's line drawn.
+    let h = image::open(&horizon_png).unwrap().to_rgb8();
+    assert_eq!(h.dimensions(), (900, 520));
+    let blue = garmentbake::preview::plot::LINE_COLORS[0];
+    assert!(
+        h.pixels().filter(|p| p.0 == blue).count() > 50,
+        "the first cache's e(k) line"
+    );
+    let m = image::open(&hem_png).unwrap().to_rgb8();
+    assert_eq!(m.dimensions(), (1100, 780));
+
+    // Bad input: one error line, exit 2, no plot written.
+    let png = dir.join("never.png");
+    let p = png.to_str().unwrap();
+    let one = [sims[0].clone()];
+    let o = garmentbake_in_root(&compare_args(&one, &["--plot-horizon", p]));
+    let e = one_error_line(&o, &png);
+    assert!(e.contains("--sim"), "{e}");
+    let o = garmentbake_in_root(&compare_args(
+        &sims,
+        &["--cache", &caches[0], "--baseline", "pbns", "--plot-hem", p],
+    ));
+    assert!(one_error_line(&o, &png).contains("--baseline pbns"));
+    let short = dir.join("short.pc2");
+    write(&short, &mean[..5]);
+    let bad = format!("short={}", short.display());
+    let o = garmentbake_in_root(&compare_args(&sims, &["--cache", &bad, "--plot-hem", p]));
+    assert!(one_error_line(&o, &png).contains("short.pc2"));
+}
