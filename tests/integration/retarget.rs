@@ -66,7 +66,8 @@ fn retargeted_walk_keeps_stance_feet_on_the_floor_and_the_body_upright() {
         median * 1e3,
         p95 * 1e3
     );
-    assert!(stance_errors.len() > 200, "too few stance frames");
+    // Measured 988 of the 2 × 993 foot steps (docs/foundation.md); a tenth fewer fails.
+    assert!(stance_errors.len() >= 890, "too few stance frames");
     assert!(
         p95 < 0.03,
         "95 % of stance frames within 3 cm of the floor, got {:.1} mm",
