@@ -14,8 +14,9 @@ use garmentbake::motion::load_clip;
 use garmentbake::rig::{SkelAnimation, Skin};
 use std::path::Path;
 
-/// UsdSkel's replay must match our LBS within this (the budget).
-const REPLAY_TOLERANCE_MM: f64 = 0.5;
+/// UsdSkel's replay must match our LBS within this: measured 0.00043 to 0.0012 mm (f32 noise;
+/// the body's 01_01 variant is the largest), so ten times the noise fails a real replay error.
+const REPLAY_TOLERANCE_MM: f64 = 0.01;
 
 fn clip(body: &Body, name: &str, fps: f32) -> SkelAnimation {
     load_clip(
@@ -690,7 +691,8 @@ fn slow_blender_imports_the_usdc_with_armature_shape_keys_and_animation() {
             "Blender vs our LBS(T + Σ w D), skirt frame {f}: max {:.4} mm",
             err * 1e3
         );
-        assert!(err < 1e-3, "skirt frame {f}: {:.3} mm", err * 1e3);
+        // Measured 0.0006 mm (docs/usd.md), as for the body below (0.0007 to 0.0010 mm).
+        assert!(err < 1e-5, "skirt frame {f}: {:.4} mm", err * 1e3);
         let blender = flat_positions(&mesh("body")["frames"][i]["positions"]);
         let ours = our_lbs(
             &s.body,
@@ -704,7 +706,7 @@ fn slow_blender_imports_the_usdc_with_armature_shape_keys_and_animation() {
             "Blender vs our LBS, body frame {f}: max {:.4} mm",
             err * 1e3
         );
-        assert!(err < 1e-3, "body frame {f}: {:.3} mm", err * 1e3);
+        assert!(err < 1e-5, "body frame {f}: {:.4} mm", err * 1e3);
     }
 }
 
