@@ -57,8 +57,8 @@ fn threejs_skins_the_posed_body_like_our_lbs() {
         eprintln!("three.js vs our LBS, frame {f}: max {:.5} mm", err * 1e3);
         // Measured 0.00038 to 0.00053 mm (f32 noise): ten times that fails a real error.
         assert!(
-            err < 1e-4,
-            "frame {f}: three.js differs from our LBS by {:.4} mm",
+            err < 5e-6,
+            "frame {f}: three.js differs from our LBS by {:.5} mm",
             err * 1e3
         );
     }
@@ -84,8 +84,8 @@ fn blender_imports_and_plays_the_posed_body() {
         eprintln!("Blender vs our LBS, frame {f}: max {:.5} mm", err * 1e3);
         // Measured 0.00072 to 0.00088 mm (f32 noise): ten times that fails a real error.
         assert!(
-            err < 1e-3,
-            "frame {f}: Blender differs from our LBS by {:.3} mm",
+            err < 9e-6,
+            "frame {f}: Blender differs from our LBS by {:.5} mm",
             err * 1e3
         );
     }
