@@ -231,15 +231,6 @@ pub fn unit_square() -> garmentbake::geometry::TriMesh {
     )
 }
 
-/// True (with a note) when GARMENTBAKE_SKIP_BLENDER is set: tests that need Blender return early.
-pub fn blender_skipped() -> bool {
-    let skip = std::env::var_os("GARMENTBAKE_SKIP_BLENDER").is_some();
-    if skip {
-        eprintln!("GARMENTBAKE_SKIP_BLENDER set: skipping a test that runs Blender");
-    }
-    skip
-}
-
 /// Runs garmentbake in the repository root (so sample paths can be relative).
 pub fn garmentbake_in_root(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_garmentbake"))

@@ -76,9 +76,6 @@ fn train(sim: &Path, out: &Path, epochs: &str, extra: &[&str]) -> serde_json::Va
 
 #[test]
 fn the_space_learns_is_deterministic_and_resumes_exactly() {
-    if blender_skipped() {
-        return;
-    }
     let dir = out_dir("dyn_space");
     let sim = short_sim(&dir);
     // Six frames span five directions around their mean: 64 principal components hold them
@@ -155,9 +152,6 @@ fn the_space_learns_is_deterministic_and_resumes_exactly() {
 
 #[test]
 fn bad_inputs_name_the_file_and_write_nothing() {
-    if blender_skipped() {
-        return;
-    }
     let dir = out_dir("dyn_bad");
     let sim = short_sim(&dir);
     let out = dir.join("m.safetensors");
@@ -296,9 +290,6 @@ fn roll_out(model: &Path, sim: &Path, out: &Path, extra: &[&str]) -> serde_json:
 
 #[test]
 fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
-    if blender_skipped() {
-        return;
-    }
     let dir = out_dir("dyn_motion");
     let sim = short_sim(&dir);
     // A huge ridge pins the fitted integrator to "keep the previous latent": the baseline.
@@ -719,9 +710,6 @@ fn usd_holds_the_roll_out_and_its_body(
 
 #[test]
 fn rollout_refuses_a_space_only_model_and_a_cache_of_another_mesh() {
-    if blender_skipped() {
-        return;
-    }
     let (dir, sim, space) = untrained_space("dyn_rollout_bad");
     let fails_with = |model: &Path, init: &str, out: &Path, extra: &[&str]| {
         let (m, o) = (model.to_str().unwrap(), out.to_str().unwrap());
@@ -968,9 +956,6 @@ fn previews_side_by_side(dir: &Path, sim: &Path, roll: &Path) {
 /// sample per clip frame between them, and `preview --cache-start` draws it on the right poses.
 #[test]
 fn a_latent_walk_ends_on_its_frames_and_previews_from_its_start() {
-    if blender_skipped() {
-        return;
-    }
     let (dir, sim, space) = untrained_space("dyn_interpolate");
     let walk = dir.join("walk.pc2");
     let args = |between: &'static str, out: &Path| {

@@ -16,3 +16,4 @@ mod simulate;
 mod usd;
 mod validate;
 mod view;
+mod suite;

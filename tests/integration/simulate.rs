@@ -78,9 +78,6 @@ fn simulate(garment: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
 
 #[test]
 fn a_waist_band_on_a_walking_body_stays_outside_and_pins_follow_within_a_millimetre() {
-    if blender_skipped() {
-        return;
-    }
     let dir = out_dir("sim_band");
     let band = waist_band(&dir);
     let pc2 = dir.join("band.pc2");
@@ -185,9 +182,6 @@ fn mean(frame: &[[f32; 3]], axis: usize) -> f64 {
 
 #[test]
 fn a_free_patch_falls_half_g_t_squared_along_minus_y_at_any_frame_rate() {
-    if blender_skipped() {
-        return;
-    }
     let dir = out_dir("sim_fall");
     let obj = patch(&dir, "patch", [1.5, 1.2, 0.0], 0.3, 6);
     let fabric = still_air(&dir);
@@ -239,9 +233,6 @@ fn a_free_patch_falls_half_g_t_squared_along_minus_y_at_any_frame_rate() {
 
 #[test]
 fn failures_name_their_cause_and_write_nothing() {
-    if blender_skipped() {
-        return;
-    }
     let dir = out_dir("sim_fail");
     let obj = patch(&dir, "patch", [1.5, 1.2, 0.0], 0.3, 6);
     let out = dir.join("x.pc2");

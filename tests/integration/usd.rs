@@ -579,7 +579,8 @@ fn seconds(t: std::time::Instant) -> f64 {
     t.elapsed().as_secs_f64()
 }
 
-/// `cargo test --test usd -- --ignored slow_bench --nocapture`: the timings of docs/usd.md.
+/// `cargo test --test integration usd::slow_bench -- --ignored --nocapture`: the timings of
+/// docs/usd.md.
 #[test]
 #[ignore]
 fn slow_bench_usd_writer() {
@@ -637,7 +638,8 @@ fn slow_bench_usd_writer() {
 }
 
 /// Blender's own USD importer (PyPI `bpy` 4.5 LTS in target/bpy-venv: `bash scripts/setup_bpy.sh`,
-/// a 373 MB wheel, hence opt-in): `cargo test --test usd -- --ignored slow_blender --nocapture`.
+/// a 373 MB wheel, hence opt-in):
+/// `cargo test --test integration usd::slow_blender -- --ignored --nocapture`.
 #[test]
 #[ignore]
 fn slow_blender_imports_the_usdc_with_armature_shape_keys_and_animation() {
