@@ -1,0 +1,97 @@
+//! `garmentbake map suggest`: a draft joint map for a clip from a rig we do not know.
+
+use super::Execute;
+use crate::io::map_suggest::Suggestion;
+use anyhow::{bail, Context, Result};
+use serde::Serialize;
+use std::path::PathBuf;
+
+/// Joint maps: draft one for a new rig.
+///
+/// A joint map names which body-rig joint each clip joint that matters drives; joints it leaves out
+/// are folded into the chain (a mapped joint lies below them) or dropped (face, fingers, toes,
+/// twist leaves). See samples/motions/cc_base.map.toml for a commented one.
+#[derive(clap::Args)]
+pub struct Args {
+    #[command(subcommand)]
+    pub action: Action,
+}
+
+#[derive(clap::Subcommand)]
+pub enum Action {
+    /// Draft a map from the clip's joint names and hierarchy (left / right, chain order) onto the
+    /// sample body's rig; prints the rig joints it could not place. Check the draft with
+    /// `garmentbake inspect CLIP.bvh --body BODY.glb --map MAP.toml`.
+    Suggest(SuggestArgs),
+}
+
+#[derive(clap::Args)]
+pub struct SuggestArgs {
+    /// The clip (.bvh).
+    pub clip: PathBuf,
+    /// Write the draft here (.toml) instead of printing it.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Print the report as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+impl Args {
+    pub fn json(&self) -> bool {
+        match &self.action {
+            Action::Suggest(a) => a.json,
+        }
+    }
+}
+
+#[derive(Serialize)]
+pub struct Report {
+    pub clip: PathBuf,
+    pub out: Option<PathBuf>,
+    pub suggestion: Suggestion,
+    /// The map as TOML.
+    pub toml: String,
+}
+
+impl Execute for Args {
+    type Report = Report;
+
+    fn execute(&self, _say: &dyn Fn(&str)) -> Result<Report> {
+        let Action::Suggest(a) = &self.action;
+        if let Some(out) = &a.out {
+            if out.extension().is_none_or(|e| e != "toml") {
+                bail!("{}: --out must be a .toml file", out.display());
+            }
+        }
+        let suggestion = crate::motion::suggest_map(&a.clip)?;
+        let toml = suggestion.to_toml(&a.clip.display().to_string());
+        if let Some(out) = &a.out {
+            exporters::atomic::write_atomic(out, toml.as_bytes())
+                .with_context(|| format!("writing {}", out.display()))?;
+        }
+        Ok(Report {
+            clip: a.clip.clone(),
+            out: a.out.clone(),
+            suggestion,
+            toml,
+        })
+    }
+
+    fn print(r: &Report) {
+        match &r.out {
+            Some(out) => println!(
+                "wrote {} ({} joints mapped)",
+                out.display(),
+                r.suggestion.pairs.len()
+            ),
+            None => print!("{}", r.toml),
+        }
+        if !r.suggestion.unplaced.is_empty() {
+            eprintln!(
+                "not placed (they keep their rest pose): {}",
+                r.suggestion.unplaced.join(", ")
+            );
+        }
+    }
+}
