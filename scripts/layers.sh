@@ -10,7 +10,7 @@ import pathlib, re, sys
 
 # Lowest first; modules on one line are peers and must not import each other.
 LAYERS = [
-    "geometry fabric compute progress preview",
+    "geometry fabric compute progress preview build_id",
     "rig",
     "body",
     "io",

@@ -8,7 +8,7 @@ use crate::models::coverage::{pose_key, Coverage, PoseKey};
 use crate::models::Pbns;
 use crate::rig::{JointTransform, Skeleton, Skin};
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use tch::Device;
 
 /// The model's garment for every pose (world space), in chunks, without gradients.
@@ -126,7 +126,7 @@ pub fn compare(
 }
 
 /// How far each frame of a clip lies from the poses a model was trained on.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ClipCoverage {
     /// Frames at least this far from every training pose are beyond the trained range (radians;
     /// see [`crate::models::coverage`]).

@@ -3,8 +3,8 @@
 //! Data flows one way; a module imports only modules on layers below its own
 //! (`scripts/layers.sh` checks it):
 //!
-//! 1. `geometry`, `fabric`, `compute`, `progress`, `preview` — meshes and maths, physical
-//!    parameters, devices, progress bars, the software rasteriser
+//! 1. `geometry`, `fabric`, `compute`, `progress`, `preview`, `build_id` — meshes and maths,
+//!    physical parameters, devices, progress bars, the software rasteriser, which build this is
 //! 2. `rig` — skeleton, forward kinematics, skinning, clips, retargeting (format-neutral)
 //! 3. `body` — the rigged body, posed, and where points lie relative to it
 //! 4. `io` — importers (OBJ, BVH, joint maps, glTF body, MakeHuman, USD meshes)
@@ -22,6 +22,7 @@
 pub mod bake;
 pub mod batch;
 pub mod body;
+pub mod build_id;
 pub mod cli;
 pub mod compare;
 pub mod compute;

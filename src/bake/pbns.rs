@@ -35,7 +35,7 @@ pub struct BakeOptions {
 }
 
 /// What the bake cost, per clip and overall, in metres (world space, after skinning).
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct BakeReport {
     pub targets: usize,
     /// Numerical rank of the offsets the clips use.
@@ -44,7 +44,7 @@ pub struct BakeReport {
     pub clips: Vec<ClipError>,
 }
 
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct ClipError {
     pub clip: String,
     pub frames: usize,

@@ -17,7 +17,7 @@ use nalgebra::{DMatrix, Matrix4, Point3};
 use rayon::prelude::*;
 
 /// What the compression kept and what it cost, in metres (world space, after skinning).
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct SequenceReport {
     pub frames: usize,
     pub targets: usize,

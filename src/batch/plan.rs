@@ -13,13 +13,44 @@ use std::path::{Path, PathBuf};
 /// The plan's schema name; bumped when a field changes meaning.
 pub const SCHEMA: &str = "garmentbake-batch-plan/1";
 
-/// What the key of every job includes besides its inputs and parameters.
+/// The package version, for people reading a plan; keys use the build id instead (it has been
+/// 0.1.0 through every change of output).
 pub const TOOL_VERSION: &str = env!("CARGO_PKG_VERSION");
+
+/// The programs a job's output depends on besides its inputs and arguments: this build of
+/// garmentbake (every job) and Blender (simulations).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Tools {
+    /// [`crate::build_id::id`].
+    pub build: String,
+    /// `blender --version`'s first line, when the plan simulates (else none); "no Blender
+    /// found" when there was none to ask, so installing one re-runs the simulations.
+    pub blender: Option<String>,
+}
+
+impl Tools {
+    /// This build, and the Blender `simulate` would run (`$GARMENTBAKE_BLENDER` or PATH) when
+    /// `simulates`.
+    pub fn here(simulates: bool) -> Tools {
+        let blender = simulates.then(|| {
+            crate::simulate::blender::find(None)
+                .and_then(|b| crate::simulate::blender::version(&b))
+                .unwrap_or_else(|_| "no Blender found".into())
+        });
+        Tools {
+            build: crate::build_id::id().into(),
+            blender,
+        }
+    }
+}
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Plan {
     pub schema: String,
     pub tool_version: String,
+    /// What the keys were made with (absent in plans written before it).
+    #[serde(default)]
+    pub tools: Option<Tools>,
     pub manifest: PathBuf,
     pub out: PathBuf,
     /// In dependency order: every job comes after the jobs it depends on.
@@ -46,8 +77,9 @@ pub struct Job {
     /// Ids of the jobs whose outputs this one reads.
     pub deps: Vec<String>,
     pub resources: Resources,
-    /// Hex SHA-256 of the tool version, the kind, the arguments with every input replaced by
-    /// its bytes' hash (or by the key of the job writing it) and outputs relative to `out`.
+    /// Hex SHA-256 of the build id (and Blender's version for a simulation), the kind, the
+    /// arguments with every input replaced by its bytes' hash (or by the key of the job writing
+    /// it) and outputs relative to `out`.
     pub key: String,
 }
 
@@ -68,9 +100,21 @@ fn t(s: impl ToString) -> Arg {
     Arg::Text(s.to_string())
 }
 
-/// Expands a manifest into jobs; `out` is the output folder (absolute).
+/// Expands a manifest into jobs keyed for this build (and the Blender on PATH when it simulates);
+/// `out` is the output folder (absolute).
 pub fn plan(resolved: &Resolved, out: &Path) -> Result<Plan> {
+    let simulates = resolved
+        .manifest
+        .garments
+        .iter()
+        .any(|g| g.dynamic.is_some());
+    plan_with(resolved, out, Tools::here(simulates))
+}
+
+/// [`plan`] with the keys made for `tools`.
+pub fn plan_with(resolved: &Resolved, out: &Path, tools: Tools) -> Result<Plan> {
     let mut b = Builder {
+        tools,
         out: out.to_path_buf(),
         cpus: resolved.manifest.threads,
         jobs: Vec::new(),
@@ -91,6 +135,7 @@ pub fn plan(resolved: &Resolved, out: &Path) -> Result<Plan> {
     Ok(Plan {
         schema: SCHEMA.into(),
         tool_version: TOOL_VERSION.into(),
+        tools: Some(b.tools),
         manifest: resolved.file.clone(),
         out: out.to_path_buf(),
         jobs: b.jobs,
@@ -137,6 +182,7 @@ impl Node<'_> {
 }
 
 struct Builder {
+    tools: Tools,
     out: PathBuf,
     /// CPU threads of every job (the manifest's `threads`).
     cpus: usize,
@@ -161,7 +207,10 @@ impl Builder {
             h.update((s.len() as u64).to_le_bytes());
             h.update(s.as_bytes());
         };
-        part(TOOL_VERSION);
+        part(&self.tools.build);
+        if kind == "simulate" {
+            part(self.tools.blender.as_deref().unwrap_or("no Blender found"));
+        }
         part(kind);
         let (mut inputs, mut outputs, mut deps, mut text) = (vec![], vec![], vec![], vec![]);
         let mut record_input = |b: &mut Self, p: &Path, part: &mut dyn FnMut(&str)| -> Result<()> {
@@ -553,4 +602,55 @@ fn dynamic_jobs(b: &mut Builder, r: &Resolved, g: &Garment) -> Result<()> {
         b.add(node("rollout", g, Some(c)), args, &[])?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn keys(tools: Tools) -> Vec<(String, String)> {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+        let resolved = super::super::manifest::read(&root.join("samples/batch.toml")).unwrap();
+        let plan = plan_with(&resolved, &root.join("target/test-out/plan-keys"), tools).unwrap();
+        plan.jobs.into_iter().map(|j| (j.id, j.key)).collect()
+    }
+
+    fn tools(build: &str, blender: &str) -> Tools {
+        Tools {
+            build: build.into(),
+            blender: Some(blender.into()),
+        }
+    }
+
+    /// Another build re-runs every job; another Blender exactly the simulations and what reads
+    /// them (the sample manifest: 37 jobs, 2 simulations, 2 dynamic trainings, 1 roll-out).
+    #[test]
+    fn keys_change_with_the_build_and_simulations_with_blender() {
+        let base = keys(tools("1935e54", "Blender 3.4.1"));
+        assert_eq!(base, keys(tools("1935e54", "Blender 3.4.1")));
+        let rebuilt = keys(tools("7f7d33d", "Blender 3.4.1"));
+        assert!(base
+            .iter()
+            .zip(&rebuilt)
+            .all(|(a, b)| a.0 == b.0 && a.1 != b.1));
+        let upgraded = keys(tools("1935e54", "Blender 4.2.0"));
+        let changed: Vec<&str> = base
+            .iter()
+            .zip(&upgraded)
+            .filter(|(a, b)| a.1 != b.1)
+            .map(|(a, _)| a.0.as_str())
+            .collect();
+        assert_eq!(
+            changed,
+            [
+                "simulate:skirt:131_01",
+                "simulate:skirt:131_02",
+                "train-dynamic:skirt:space",
+                "train-dynamic:skirt:dynamic",
+                "rollout:skirt:131_02",
+            ],
+            "of {} jobs",
+            base.len()
+        );
+    }
 }

@@ -41,7 +41,8 @@ pub struct Outcome {
     pub outputs: Vec<PathBuf>,
     /// Key figures from the command's report (replay error, inside %, ...).
     pub metrics: BTreeMap<String, f64>,
-    /// Why it failed or was skipped: the command's `error:` line names the file.
+    /// Why it failed or was skipped: the command's `error:` line names the file. On a job that
+    /// ran: its report could not be read into the command's report type (a bug to report).
     pub error: Option<String>,
     pub log: PathBuf,
 }
@@ -76,6 +77,10 @@ pub fn key_path(path: &Path) -> PathBuf {
     path.with_file_name(name)
 }
 
+/// Reads a job's `--json` report into its key figures, given the job's kind: through the
+/// commands' own report types, which live above this layer (the CLI passes `cli::batch::figures`).
+pub type Figures = dyn Fn(&str, &[u8]) -> Result<BTreeMap<String, f64>> + Sync;
+
 /// Every output (and the report) is there and carries the job's key.
 pub fn up_to_date(job: &Job) -> bool {
     job.outputs
@@ -87,27 +92,55 @@ pub fn up_to_date(job: &Job) -> bool {
 /// Runs `job` with the binary `exe` unless it is up to date, retrying up to `retries` times a
 /// run that ended for a reason other than bad input (exit 2) or a failed check (exit 1): a
 /// crash, a kill, a lost machine.
-pub fn run_job(job: &Job, exe: &Path, retries: usize) -> Outcome {
+pub fn run_job(job: &Job, exe: &Path, retries: usize, figures: &Figures) -> Outcome {
     if up_to_date(job) {
         let mut done = Outcome::of(job, Status::UpToDate);
-        done.metrics = std::fs::read(&job.report)
-            .ok()
-            .and_then(|b| serde_json::from_slice(&b).ok())
-            .map(|r| metrics(&job.kind, &r))
-            .unwrap_or_default();
+        let report = std::fs::read(&job.report)
+            .with_context(|| format!("cannot read {}", job.report.display()));
+        read_figures(&mut done, job, report.and_then(|r| figures(&job.kind, &r)));
         return done;
     }
     let mut outcome = Outcome::of(job, Status::Failed);
     let start = Instant::now();
-    match attempts(job, exe, retries, &mut outcome) {
+    match attempts(job, exe, retries, figures, &mut outcome) {
         Ok(()) => outcome.status = Status::Ran,
-        Err(e) => outcome.error = Some(format!("{e:#}").replace('\n', " ")),
+        Err(e) => outcome.error = Some(one_line(&e)),
     }
     outcome.seconds = start.elapsed().as_secs_f64();
     outcome
 }
 
-fn attempts(job: &Job, exe: &Path, retries: usize, outcome: &mut Outcome) -> Result<()> {
+fn one_line(e: &anyhow::Error) -> String {
+    format!("{e:#}").replace('\n', " ")
+}
+
+/// The figures of `job`'s report, or why there are none: a report that does not read as its
+/// command's is said, not skipped (the job's outputs still stand).
+fn read_figures(outcome: &mut Outcome, job: &Job, figures: Result<BTreeMap<String, f64>>) {
+    match figures {
+        Ok(f) => {
+            outcome.metrics = f;
+            outcome.error = None;
+        }
+        Err(e) => {
+            outcome.metrics.clear();
+            outcome.error = Some(format!(
+                "{}: not a `{}` report: {}",
+                job.report.display(),
+                job.kind,
+                one_line(&e)
+            ));
+        }
+    }
+}
+
+fn attempts(
+    job: &Job,
+    exe: &Path,
+    retries: usize,
+    figures: &Figures,
+    outcome: &mut Outcome,
+) -> Result<()> {
     // A stale key must not vouch for what this run is about to replace.
     for p in job.outputs.iter().chain([&job.report]) {
         let _ = std::fs::remove_file(key_path(p));
@@ -144,13 +177,14 @@ fn attempts(job: &Job, exe: &Path, retries: usize, outcome: &mut Outcome) -> Res
             }
             Err(e) => return Err(e),
         };
-        let report: Option<serde_json::Value> = serde_json::from_slice(&run.stdout).ok();
-        if let Some(r) = &report {
-            outcome.metrics = metrics(&job.kind, r);
+        // Any JSON is kept as the report, a failed check's too (its figures say by how much).
+        let report = serde_json::from_slice::<serde::de::IgnoredAny>(&run.stdout).is_ok();
+        if report {
             exporters::atomic::write_atomic(&job.report, &run.stdout)?;
+            read_figures(outcome, job, figures(&job.kind, &run.stdout));
         }
         match run.status.code() {
-            Some(0) if report.is_some() => break,
+            Some(0) if report => break,
             Some(0) => anyhow::bail!(
                 "{} printed no JSON report (log: {})",
                 job.id,
@@ -189,40 +223,6 @@ fn error_line(log: &Path, code: i32) -> String {
     }
 }
 
-/// The figures a person scans the summary for, per kind of job.
-pub fn metrics(kind: &str, r: &serde_json::Value) -> BTreeMap<String, f64> {
-    let picks: &[(&str, &str, f64)] = match kind {
-        "train" => &[
-            ("edge_mm", "/last/train/edge_mm", 1.0),
-            ("collided_pct", "/last/train/collided_pct", 1.0),
-        ],
-        "eval" => &[
-            ("edge_mm", "/metrics/model/edge_mm", 1.0),
-            ("inside_pct", "/inside/model/inside_pct", 1.0),
-        ],
-        "bake" => &[
-            ("replay_mm", "/report/clips/0/max_error_m", 1e3),
-            ("targets", "/report/targets", 1.0),
-        ],
-        "validate" => &[("replay_mm", "/replay/max_mm", 1.0)],
-        "simulate" => &[("s_per_frame", "/seconds_per_frame", 1.0)],
-        "train-dynamic" => &[("train_mm", "/train/mean_mm", 1.0)],
-        "rollout" => &[
-            ("inside_pct", "/summary/inside_pct", 1.0),
-            ("vs_sim_mm", "/reference/clip_mm", 1.0),
-        ],
-        _ => &[],
-    };
-    picks
-        .iter()
-        .filter_map(|(name, ptr, scale)| {
-            r.pointer(ptr)?
-                .as_f64()
-                .map(|v| (name.to_string(), v * scale))
-        })
-        .collect()
-}
-
 /// Runs the plan here with up to `jobs` at a time; `done` hears of each job as it ends.
 /// Returns one outcome per job, in plan order.
 pub fn run_local(
@@ -230,6 +230,7 @@ pub fn run_local(
     exe: &Path,
     jobs: usize,
     retries: usize,
+    figures: &Figures,
     done: &dyn Fn(&Outcome),
 ) -> Vec<Outcome> {
     let n = plan.jobs.len();
@@ -261,7 +262,7 @@ pub fn run_local(
                 running += 1;
                 let (tx, job) = (tx.clone(), &plan.jobs[i]);
                 scope.spawn(move || {
-                    let _ = tx.send((i, run_job(job, exe, retries)));
+                    let _ = tx.send((i, run_job(job, exe, retries, figures)));
                 });
             }
             let (i, o) = rx.recv().expect("a job thread reports");

@@ -9,7 +9,7 @@ use crate::eval::ClipCoverage;
 use crate::motion::{load_clip, read_maps};
 use crate::validate::Validation;
 use anyhow::{bail, Context, Result};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
 /// Bake a trained PBNS model into a file any engine plays without a neural runtime.
@@ -60,7 +60,7 @@ pub struct Args {
 }
 
 /// One clip's pose coverage, as `eval` reports it.
-#[derive(Serialize)]
+#[derive(Serialize, Deserialize)]
 pub struct ClipCoverageLine {
     pub clip: String,
     #[serde(flatten)]
@@ -96,7 +96,7 @@ impl ClipCoverageLine {
 }
 
 /// What was written and what the bake cost.
-#[derive(Serialize)]
+#[derive(Serialize, Deserialize)]
 pub struct Report {
     pub out: PathBuf,
     pub bytes: u64,

@@ -7,7 +7,9 @@ use crate::batch::manifest;
 use crate::batch::plan::{plan, Plan};
 use crate::batch::run::{run_job, run_local, Outcome, Status};
 use anyhow::{bail, Context, Result};
+use serde::de::DeserializeOwned;
 use serde::Serialize;
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -162,7 +164,7 @@ impl RunArgs {
                         bar.println(line(o, &plan.out));
                     }
                 };
-                let outcomes = run_local(&plan, &exe, self.jobs, self.retries, &done);
+                let outcomes = run_local(&plan, &exe, self.jobs, self.retries, &figures, &done);
                 bar.finish_and_clear();
                 outcomes
             }
@@ -208,7 +210,7 @@ impl Execute for Args {
                     .iter()
                     .find(|x| x.id == j.id)
                     .with_context(|| format!("{}: no job '{}'", j.plan.display(), j.id))?;
-                Ok(Report::Job(run_job(job, &exe()?, j.retries)))
+                Ok(Report::Job(run_job(job, &exe()?, j.retries, &figures)))
             }
         }
     }
@@ -228,6 +230,63 @@ impl Execute for Args {
             Report::Job(o) => i32::from(o.status == Status::Failed),
         }
     }
+}
+
+/// The figures a person scans the summary for, per kind of job, read from the job's `--json`
+/// report through the command's own report type: a renamed field breaks this at compile time
+/// instead of dropping a figure from every summary.
+pub fn figures(kind: &str, report: &[u8]) -> Result<BTreeMap<String, f64>> {
+    fn read<R: DeserializeOwned>(report: &[u8]) -> Result<R> {
+        Ok(serde_json::from_slice(report)?)
+    }
+    let f: Vec<(&str, Option<f64>)> = match kind {
+        "train" => {
+            let r: super::train::Report = read(report)?;
+            let last = r.last.map(|e| e.train);
+            vec![
+                ("edge_mm", last.map(|m| m.edge_mm)),
+                ("collided_pct", last.map(|m| m.collided_pct)),
+            ]
+        }
+        "eval" => {
+            let r: super::eval::Report = read(report)?;
+            vec![
+                ("edge_mm", Some(r.metrics.model.edge_mm)),
+                ("inside_pct", Some(r.inside.model.inside_pct)),
+            ]
+        }
+        "bake" => {
+            let r: super::bake::Report = read(report)?;
+            let first = r.report.clips.first();
+            vec![
+                ("replay_mm", first.map(|c| 1e3 * c.max_error_m as f64)),
+                ("targets", Some(r.report.targets as f64)),
+            ]
+        }
+        "validate" => {
+            let r: super::validate::Report = read(report)?;
+            vec![("replay_mm", r.replay.map(|e| e.max_mm))]
+        }
+        "simulate" => {
+            let r: super::simulate::Report = read(report)?;
+            vec![("s_per_frame", Some(r.seconds_per_frame))]
+        }
+        "train-dynamic" => {
+            let r: super::train_dynamic::Report = read(report)?;
+            vec![("train_mm", Some(r.train.mean_mm))]
+        }
+        "rollout" => {
+            let r: super::rollout::Report = read(report)?;
+            vec![
+                ("inside_pct", Some(r.summary.inside.inside_pct)),
+                ("vs_sim_mm", r.reference.map(|v| v.clip_mm)),
+            ]
+        }
+        _ => vec![],
+    };
+    Ok(f.into_iter()
+        .filter_map(|(name, v)| Some((name.to_string(), v?)))
+        .collect())
 }
 
 fn print_plan(plan: &Plan, seconds: f64) {
@@ -307,4 +366,20 @@ fn print_run(r: &RunReport) {
         r.wall_seconds,
         r.out.join("logs").display()
     );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A report that is not its command's is an error naming what is missing, not a summary
+    /// line quietly short of a figure.
+    #[test]
+    fn a_report_not_of_its_command_is_an_error() {
+        let stale = br#"{"summary": {"inside_pct": 3.0}, "reference": {"clip_mm": 50.0}}"#;
+        let e = figures("rollout", stale).unwrap_err();
+        assert!(format!("{e:#}").contains("missing field"), "{e:#}");
+        assert!(figures("validate", b"[]").is_err());
+        assert!(figures("a kind with no figures", b"{}").unwrap().is_empty());
+    }
 }

@@ -9,7 +9,7 @@ use crate::metrics::{body_edges_under, ClothGeometry, Inside, Metrics};
 use crate::models::coverage::{Coverage, OutsideWeights};
 use crate::models::file::check_skeleton;
 use anyhow::{bail, Result};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
 /// Evaluate a trained model on a motion clip: write the garment's world-space vertices for every
@@ -61,7 +61,7 @@ pub struct Args {
 }
 
 /// Metrics of the model and of plain LBS over one clip.
-#[derive(Serialize)]
+#[derive(Serialize, Deserialize)]
 pub struct Report {
     pub model: Option<String>,
     pub clip: String,
@@ -88,13 +88,13 @@ pub struct Report {
     pub view: Option<(PathBuf, u64)>,
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, Deserialize)]
 pub struct SeriesMetrics {
     pub model: Metrics,
     pub lbs: Metrics,
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, Deserialize)]
 pub struct SeriesInside {
     pub model: Inside,
     pub lbs: Inside,
@@ -131,7 +131,7 @@ pub fn coverage_line(k: &ClipCoverage, frames: usize, farthest: &[usize]) -> Str
 }
 
 /// A clip's pose coverage and the figures of its frames within and beyond the trained range.
-#[derive(Serialize)]
+#[derive(Serialize, Deserialize)]
 pub struct CoverageReport {
     #[serde(flatten)]
     pub clip: ClipCoverage,
@@ -142,7 +142,7 @@ pub struct CoverageReport {
 }
 
 /// Model and plain-LBS figures over a subset of a clip's frames.
-#[derive(Serialize)]
+#[derive(Serialize, Deserialize)]
 pub struct Split {
     pub frames: usize,
     pub metrics: SeriesMetrics,
@@ -150,7 +150,7 @@ pub struct Split {
 }
 
 /// Mean edge strain |e − e_T| / e_T (%).
-#[derive(Serialize)]
+#[derive(Serialize, Deserialize)]
 pub struct Strain {
     pub model: f64,
     pub lbs: f64,
@@ -346,7 +346,7 @@ fn outside_weights(
 const UNDER: f32 = 0.02;
 
 /// How much the skinned body overlaps itself over the clip (vertices inside another part).
-#[derive(Serialize)]
+#[derive(Serialize, Deserialize)]
 pub struct OverlapSummary {
     pub median: usize,
     pub most: usize,

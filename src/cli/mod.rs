@@ -14,6 +14,7 @@ pub mod rollout;
 pub mod simulate;
 pub mod train;
 pub mod train_dynamic;
+pub mod upgrade;
 pub mod validate;
 pub mod view;
 
@@ -63,6 +64,10 @@ converted at the edges: BVH units are scaled to the body by hip height, MakeHuma
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// No progress on stderr: neither the terminal bar nor, off a terminal (a farm log), the
+    /// plain line per tenth of the work or per 30 s.
+    #[arg(long, global = true)]
+    quiet: bool,
 }
 
 #[derive(Subcommand)]
@@ -82,11 +87,13 @@ enum Command {
     Batch(batch::Args),
     Validate(validate::Args),
     View(view::Args),
+    Upgrade(upgrade::Args),
 }
 
 /// Runs the CLI; errors are one line on stderr and exit code 2 (1 is left for failed checks).
 pub fn main() -> i32 {
     let cli = Cli::parse();
+    crate::progress::set_quiet(cli.quiet);
     let result = match cli.command {
         Command::Inspect(a) => run(&a, a.json),
         Command::Pose(a) => run(&a, a.output.json),
@@ -103,6 +110,7 @@ pub fn main() -> i32 {
         Command::Batch(a) => run(&a, a.json()),
         Command::Validate(a) => run(&a, a.output.json),
         Command::View(a) => run(&a, a.output.json),
+        Command::Upgrade(a) => run(&a, a.output.json),
     };
     match result {
         Ok(code) => code,

@@ -15,7 +15,7 @@ use crate::simulate::stats::{self, FrameStats, Series, Summary};
 use crate::validate::{check_file, replay::Reference, Validation};
 use anyhow::{bail, Context, Result};
 use exporters::FileKind;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
 /// Play a dynamic garment model (`train-dynamic --stage dynamic`) over motion clips.
@@ -120,7 +120,7 @@ pub struct Args {
 }
 
 /// Several simulations of the clip (two or more --reference).
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct References {
     pub paths: Vec<PathBuf>,
     /// Every pair of simulations against each other, averaged: the simulator's own spread.
@@ -134,7 +134,7 @@ pub struct References {
 }
 
 /// Roll-outs restarted from the reference every `frames` frames, `frames` long.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Restarts {
     pub frames: usize,
     /// Each restart's first frame (of the clip) and its error against the reference.
@@ -165,7 +165,7 @@ impl Restarts {
 }
 
 /// Mean milliseconds per frame of each phase.
-#[derive(Clone, Copy, Debug, Default, Serialize)]
+#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize)]
 pub struct Timing {
     pub inputs_ms: f64,
     pub encoder_ms: f64,
@@ -182,7 +182,7 @@ pub struct Timing {
 const WINDOW: usize = 100;
 
 /// Metrics over one span of frames.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Window {
     pub first_frame: usize,
     pub last_frame: usize,
@@ -209,7 +209,7 @@ impl Window {
     }
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, Deserialize)]
 pub struct Report {
     pub motions: Vec<PathBuf>,
     pub fps: f32,

@@ -7,7 +7,7 @@ use crate::garment::Garment;
 use crate::io::gltf_body::read_body;
 use crate::simulate::{self, cache, stats, Scene, Settings};
 use anyhow::{bail, Context, Result};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
 /// Simulate a garment on a motion clip with Blender's cloth solver (headless, a subprocess) and
@@ -80,7 +80,7 @@ pub struct Args {
     pub output: OutputArgs,
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, Deserialize)]
 pub struct Report {
     pub motion: PathBuf,
     pub garment: PathBuf,

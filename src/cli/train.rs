@@ -7,7 +7,7 @@ use crate::train::pbns::{PhaseSplit, Trainer};
 use crate::train::poses::{count, PoseKind};
 use crate::train::{fit_every, CheckpointEvery, FitOptions, Fitted, Training};
 use anyhow::Result;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
 /// Train a PBNS garment model: MLP over the pose → PSD blend shapes → linear blend skinning,
@@ -62,7 +62,7 @@ pub struct Args {
 }
 
 /// What `train` did.
-#[derive(Serialize)]
+#[derive(Serialize, Deserialize)]
 pub struct Report {
     #[serde(flatten)]
     pub fitted: Fitted,

@@ -17,7 +17,7 @@ use crate::train::motion::{
 };
 use crate::train::{fit, FitOptions, Fitted, Training};
 use anyhow::{bail, Result};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
 /// Train the dynamic garment model on cloth simulations (`garmentbake simulate`).
@@ -173,7 +173,7 @@ pub enum StageArg {
     Dynamic,
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, Deserialize)]
 pub struct Report {
     pub stage: String,
     #[serde(flatten)]

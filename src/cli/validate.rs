@@ -5,7 +5,7 @@ use super::Execute;
 use crate::validate::replay::{error_png, Reference, ReplayError};
 use crate::validate::{check_file, checkable, Checked, Problem};
 use anyhow::{bail, Result};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
 /// Check one file the way a pipeline's CI would, with our own readers (no Node, no Blender).
@@ -71,7 +71,7 @@ pub struct Args {
     pub output: OutputArgs,
 }
 
-#[derive(Serialize)]
+#[derive(Serialize, Deserialize)]
 pub struct Report {
     pub file: PathBuf,
     pub format: String,

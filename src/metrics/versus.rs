@@ -4,13 +4,13 @@
 //! simulations are: a loose garment is chaotic, so the simulator itself defines it only to that
 //! spread, and a model as far from them as they are from each other is as good as a re-run.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// Frames per clip: per frame, per vertex.
 pub type Frames = [Vec<[f32; 3]>];
 
 /// Mean vertex L2 distance to a reference, over spans of the played frames (frame 0 the start).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Versus {
     pub one_step_mm: f64,
     pub first_50_mm: f64,
@@ -81,7 +81,7 @@ pub struct Simulations<'a> {
 }
 
 /// Played frames against several simulations of one clip.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Ensemble {
     /// Against each simulation, in the order given.
     pub each: Vec<Versus>,

@@ -12,7 +12,7 @@
 
 use nalgebra::{UnitQuaternion, Vector3};
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use tch::{Kind, Tensor};
 
 /// A pose as balancing compares it: one rotation vector per compared joint.
@@ -80,7 +80,7 @@ impl Coverage {
 }
 
 /// How many blend-shape weights of a clip lie outside the training range.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct OutsideWeights {
     /// Weights looked at (frames × blend shapes).
     pub values: usize,

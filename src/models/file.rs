@@ -8,6 +8,13 @@
 //! Deterministic bytes: safetensors sorts tensors by name, the metadata is one key (a
 //! `HashMap` with several would serialise in random order) and the JSON has sorted keys and no
 //! timestamps or absolute paths. Checkpoints are the same format plus the Adam state.
+//!
+//! Versions: the description carries its format version. This build reads every version from
+//! [`OLDEST`] on, bringing an older description up to date as it loads ([`migrate`]: one step per
+//! version, each saying what changed), and `garmentbake upgrade` rewrites an older file in the
+//! current version with its tensors byte for byte. A file newer than this build, or older than
+//! [`OLDEST`], is refused with a message that says which. tests/fixtures/models/ keeps a file
+//! written by the previous version, read by the tests.
 
 use super::coverage::Coverage;
 use super::dynamic::space::Consts;
@@ -29,7 +36,11 @@ use tch::{Device, Kind, Tensor};
 
 /// One format for every model kind; the kind is in the metadata (`model.kind`).
 pub const FORMAT: &str = "garmentbake.model";
-pub const VERSION: u32 = 2;
+/// The version written. v3: the description names the build that trained the model
+/// (`written_by`).
+pub const VERSION: u32 = 3;
+/// The oldest version read (v2: PBNS and dynamic models in one format, the kind in `model.kind`).
+pub const OLDEST: u32 = 2;
 /// The one `__metadata__` key.
 pub const METADATA_KEY: &str = "garmentbake";
 
@@ -37,13 +48,34 @@ pub const METADATA_KEY: &str = "garmentbake";
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ModelInfo {
     pub format: String,
+    /// The file's version as read (an older file keeps its number until rewritten); files are
+    /// always written in [`VERSION`].
     pub version: u32,
+    /// The build that last wrote the model's weights; none in a file from before v3 (unknown).
+    pub written_by: Option<WrittenBy>,
     pub skeleton: PlainSkeleton,
     pub garment: GarmentInfo,
     pub body: BodyInfo,
     pub fabric: Fabric,
     /// The model kind (`"kind"`) and what only that kind describes.
     pub model: KindInfo,
+}
+
+/// A garmentbake build: its package version (for people) and [`crate::build_id`] (exact).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WrittenBy {
+    pub version: String,
+    pub build: String,
+}
+
+impl WrittenBy {
+    /// This build.
+    pub fn this() -> WrittenBy {
+        WrittenBy {
+            version: env!("CARGO_PKG_VERSION").into(),
+            build: crate::build_id::id().into(),
+        }
+    }
 }
 
 /// What a model kind adds to the description; the tag chooses how the tensors are read.
@@ -444,9 +476,65 @@ pub fn to_bytes(file: &ModelFile) -> Result<Vec<u8>> {
     for (name, t) in &file.extra {
         blobs.push((name.clone(), Blob::float(t)));
     }
-    let json = serde_json::to_string(&file.info)?;
-    let meta = HashMap::from([(METADATA_KEY.to_string(), json)]);
-    Ok(safetensors::serialize(blobs, Some(meta))?)
+    let info = ModelInfo {
+        version: VERSION,
+        written_by: Some(WrittenBy::this()),
+        ..file.info.clone()
+    };
+    Ok(safetensors::serialize(blobs, Some(metadata(&info)?))?)
+}
+
+/// The one `__metadata__` entry holding `info`.
+fn metadata(info: &ModelInfo) -> Result<HashMap<String, String>> {
+    Ok(HashMap::from([(
+        METADATA_KEY.to_string(),
+        serde_json::to_string(info)?,
+    )]))
+}
+
+/// What [`upgrade`] did.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Upgraded {
+    pub from_version: u32,
+    pub to_version: u32,
+    /// False when the file already was in the current version (then nothing is written).
+    pub rewritten: bool,
+    pub tensors: usize,
+    pub bytes: u64,
+}
+
+/// Rewrites the model file (or checkpoint) `path` in the current version at `out` (atomically;
+/// may be `path`): the description migrated, every tensor byte for byte, `written_by` kept (a
+/// file from before v3 still does not say which build trained it).
+pub fn upgrade(path: &Path, out: &Path) -> Result<Upgraded> {
+    let bytes = read_bytes(path)?;
+    let st = parse(path, &bytes)?;
+    let info = info_of(path, &bytes)?;
+    let from_version = info.version;
+    let tensors = st.len();
+    if from_version == VERSION && out == path {
+        return Ok(Upgraded {
+            from_version,
+            to_version: VERSION,
+            rewritten: false,
+            tensors,
+            bytes: bytes.len() as u64,
+        });
+    }
+    let info = ModelInfo {
+        version: VERSION,
+        ..info
+    };
+    let upgraded = safetensors::serialize(st.tensors(), Some(metadata(&info)?))
+        .map_err(|e| anyhow::anyhow!("{}: cannot rewrite ({e:?})", path.display()))?;
+    exporters::atomic::write_atomic(out, &upgraded)?;
+    Ok(Upgraded {
+        from_version,
+        to_version: VERSION,
+        rewritten: true,
+        tensors,
+        bytes: upgraded.len() as u64,
+    })
 }
 
 /// The PBNS network's tensors: MLP, PSD basis, the sparse skin's slots and weights.
@@ -756,19 +844,29 @@ fn info_of(path: &Path, bytes: &[u8]) -> Result<ModelInfo> {
                 path.display()
             )
         })?;
-    let header: FormatHeader = serde_json::from_str(json)
-        .with_context(|| format!("{}: invalid model description", path.display()))?;
-    if header.format != FORMAT || header.version != VERSION {
-        bail!(
-            "{}: model format {} v{}, this build reads {FORMAT} v{VERSION} (retrain the model with this build)",
-            path.display(),
-            header.format,
-            header.version
-        );
+    let invalid = || format!("{}: invalid model description", path.display());
+    let header: FormatHeader = serde_json::from_str(json).with_context(invalid)?;
+    let (name, version) = (path.display(), header.version);
+    if header.format != FORMAT {
+        bail!("{name}: format '{}', not {FORMAT}", header.format);
     }
-    let info: ModelInfo = serde_json::from_str(json)
-        .with_context(|| format!("{}: invalid model description", path.display()))?;
-    Ok(info)
+    if version > VERSION {
+        bail!("{name}: model format v{version} is newer than this build reads (v{OLDEST} to v{VERSION}): use a newer garmentbake");
+    }
+    if version < OLDEST {
+        bail!("{name}: model format v{version} is older than this build reads (v{OLDEST} to v{VERSION}): retrain the model");
+    }
+    let description = serde_json::from_str(json).with_context(invalid)?;
+    serde_json::from_value(migrate(version, description)).with_context(invalid)
+}
+
+/// A description of format `version` brought up to [`VERSION`], one step per version.
+fn migrate(version: u32, mut description: serde_json::Value) -> serde_json::Value {
+    if version < 3 {
+        // v3 names the build that trained the model; a v2 file does not say.
+        description["written_by"] = serde_json::Value::Null;
+    }
+    description
 }
 
 /// A tensor's bytes for safetensors (little-endian, as the format requires).

@@ -38,6 +38,31 @@ pub fn find(explicit: Option<&Path>) -> Result<PathBuf> {
     })
 }
 
+/// The first line of `blender --version` ("Blender 3.4.1"), once per executable per process:
+/// part of every cache key, so another Blender simulates again.
+pub fn version(blender: &Path) -> Result<String> {
+    static SEEN: std::sync::Mutex<Vec<(PathBuf, String)>> = std::sync::Mutex::new(Vec::new());
+    let mut seen = SEEN.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some((_, v)) = seen.iter().find(|(p, _)| p == blender) {
+        return Ok(v.clone());
+    }
+    let out = Command::new(blender)
+        .arg("--version")
+        .stdin(Stdio::null())
+        .output()
+        .with_context(|| format!("cannot start Blender ({})", blender.display()))?;
+    let text = String::from_utf8_lossy(&out.stdout);
+    let Some(line) = text.lines().map(str::trim).find(|l| !l.is_empty()) else {
+        bail!(
+            "{} --version printed nothing ({}): is it Blender?",
+            blender.display(),
+            out.status
+        );
+    };
+    seen.push((blender.to_path_buf(), line.to_string()));
+    Ok(line.to_string())
+}
+
 /// job.json: everything the script reads besides the arrays.
 #[derive(Serialize)]
 struct Job<'a> {

@@ -1,6 +1,7 @@
 //! Simulations are slow and deterministic: each is stored once under the hash of exactly what
-//! Blender is given (script, meshes, per-frame points, settings) plus the tool version, so a
-//! second request with the same inputs is read back instead of re-simulated.
+//! Blender is given (script, meshes, per-frame points, settings), which Blender runs it and which
+//! build of garmentbake measures it ([`crate::build_id`]), so a second request with the same
+//! inputs is read back instead of re-simulated, and an upgrade of either program simulates again.
 
 use super::stats::{FrameStats, Summary};
 use super::Frames;
@@ -23,10 +24,14 @@ pub struct Entry {
     pub frames: Vec<FrameStats>,
 }
 
-/// Hex SHA-256 of the tool version and every job file (name and bytes).
-pub fn key(files: &super::blender::JobFiles) -> String {
+/// Hex SHA-256 of the build id, Blender's version (`blender --version`'s first line) and every
+/// job file (name and bytes).
+pub fn key(build: &str, blender: &str, files: &super::blender::JobFiles) -> String {
     let mut h = Sha256::new();
-    h.update(env!("CARGO_PKG_VERSION").as_bytes());
+    for part in [build, blender] {
+        h.update((part.len() as u64).to_le_bytes());
+        h.update(part.as_bytes());
+    }
     for (name, bytes) in files {
         h.update((name.len() as u64).to_le_bytes());
         h.update(name.as_bytes());
@@ -66,4 +71,24 @@ pub fn store(dir: &Path, key: &str, frames: &Frames, fps: f32, entry: &Entry) ->
     exporters::pc2::write(&pc2, &cache).map_err(|e| anyhow::anyhow!("{e}"))?;
     exporters::atomic::write_atomic(&json, &serde_json::to_vec_pretty(entry)?)?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_key_changes_with_the_build_blender_and_every_byte() {
+        let files: super::super::blender::JobFiles = vec![("job.json", b"{}".to_vec())];
+        let k = key("1935e54", "Blender 3.4.1", &files);
+        assert_eq!(k, key("1935e54", "Blender 3.4.1", &files));
+        assert_ne!(k, key("7f7d33d", "Blender 3.4.1", &files), "another build");
+        assert_ne!(
+            k,
+            key("1935e54", "Blender 4.2.0", &files),
+            "another Blender"
+        );
+        let other: super::super::blender::JobFiles = vec![("job.json", b"{ }".to_vec())];
+        assert_ne!(k, key("1935e54", "Blender 3.4.1", &other), "another job");
+    }
 }

@@ -152,7 +152,8 @@ pub fn run(
 ) -> Result<Outcome> {
     let prepared = prepare(scene, settings)?;
     let files = blender::job_files(scene, &prepared, settings)?;
-    let key = cache::key(&files);
+    let blender_version = blender::version(&settings.blender)?;
+    let key = cache::key(crate::build_id::id(), &blender_version, &files);
     let n = scene.garment.mesh.vertex_count();
     let lead = prepared.lead_in;
     let clip_body = prepared.body_frames[lead..].to_vec();

@@ -260,7 +260,7 @@ pub struct SpaceTrainer {
 }
 
 /// Reconstruction error of frames (per-vertex L2 distance).
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Reconstruction {
     pub frames: usize,
     pub mean_mm: f64,
@@ -350,6 +350,8 @@ impl SpaceTrainer {
         let info = ModelInfo {
             format: FORMAT.into(),
             version: VERSION,
+            // Stamped by `file::save` with the build that writes it.
+            written_by: None,
             skeleton: body.skeleton.to_plain(),
             garment: GarmentInfo::of(&garment, &pinned),
             body: BodyInfo::of(&body),

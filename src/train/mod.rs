@@ -11,7 +11,7 @@ pub mod pbns;
 pub mod poses;
 
 use anyhow::{Context, Result};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -142,7 +142,7 @@ impl std::str::FromStr for CheckpointEvery {
 }
 
 /// Where the loop's wall time went (seconds).
-#[derive(Clone, Copy, Debug, Default, Serialize)]
+#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize)]
 pub struct WallSplit {
     /// Optimisation steps (forward, losses, backward, the optimiser).
     pub steps: f64,
@@ -180,7 +180,7 @@ impl std::fmt::Display for WallSplit {
 }
 
 /// What the loop did.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Fitted {
     pub out: PathBuf,
     pub checkpoint: PathBuf,

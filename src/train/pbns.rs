@@ -25,7 +25,7 @@ use crate::motion::{load_clip, read_maps};
 use crate::rig::{weights, SkelAnimation};
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 use tch::{Device, Kind, Tensor};
@@ -242,7 +242,7 @@ impl PhaseTimes {
 }
 
 /// [`PhaseTimes`] as reported: throughput and percentages of the step time.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct PhaseSplit {
     pub seconds: f64,
     pub steps: usize,
@@ -1207,6 +1207,8 @@ fn describe(
     ModelInfo {
         format: FORMAT.into(),
         version: VERSION,
+        // Stamped by `file::save` with the build that writes it.
+        written_by: None,
         skeleton: body.skeleton.to_plain(),
         garment: GarmentInfo::of(garment, pinned_list),
         body: BodyInfo::of(body),

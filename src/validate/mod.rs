@@ -13,11 +13,11 @@ pub mod usd;
 use anyhow::{bail, Context, Result};
 use exporters::FileKind;
 use replay::{compare, replay_gltf, Reference, ReplayError};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// One finding, located by a JSON pointer (glTF) or a byte/frame position (caches).
-#[derive(Clone, Debug, Serialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct Problem {
     pub at: String,
     pub message: String,
@@ -114,7 +114,7 @@ pub struct Checked {
 
 /// `validate` run by the command that just wrote the file (`bake --validate`, `rollout
 /// --validate`): the verdict, the errors and the replay, per clip.
-#[derive(Serialize)]
+#[derive(Serialize, Deserialize)]
 pub struct Validation {
     pub clip: Option<String>,
     pub passed: bool,

@@ -8,7 +8,7 @@ use crate::models::file::ModelFile;
 use crate::preview::{render_panel, save_png, ErrorBands, Framing, Panel, View};
 use crate::rig::SkelAnimation;
 use anyhow::{Context, Result};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::path::Path;
 use tch::Device;
 
@@ -94,7 +94,7 @@ impl Reference {
 }
 
 /// Replay error of a file against the model, in millimetres.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ReplayError {
     pub clip: String,
     pub frames: usize,

@@ -369,3 +369,257 @@ fn ray_runs_the_same_bytes_as_the_local_runner() {
     );
     assert!(artifacts(&dir).iter().all(|a| !a.is_empty()));
 }
+
+/// The figure names of `job`'s metrics.
+fn figures(job: &Value) -> Vec<String> {
+    assert_eq!(job["error"], Value::Null, "{job:#}");
+    let mut names: Vec<String> = job["metrics"]
+        .as_object()
+        .unwrap_or_else(|| panic!("{job:#}"))
+        .keys()
+        .cloned()
+        .collect();
+    names.sort();
+    names
+}
+
+/// Every figure docs/batch.md lists for the static jobs comes out of the tiny manifest's run.
+#[test]
+fn static_jobs_report_their_figures() {
+    let dir = whole();
+    let (_, report) = batch(&["run"], dir);
+    for (id, want) in [
+        ("train:skirt", &["collided_pct", "edge_mm"][..]),
+        ("bake:skirt:131_02:glb", &["replay_mm", "targets"]),
+        ("validate:skirt:131_02:glb", &["replay_mm"]),
+    ] {
+        assert_eq!(figures(job(&report, id)), want, "{id}");
+    }
+}
+
+/// The dynamic jobs (simulate → train-dynamic space → dynamic → rollout) run one by one by
+/// `batch job` from a plan written here (six simulated frames, no epochs): each outcome carries
+/// the figures docs/batch.md lists, read through the commands' own report types. Before, the
+/// roll-out's `inside_pct` was looked up at `/summary/inside_pct`, a path its report never had
+/// (it is `summary.inside.inside_pct`), and was silently missing from every summary.
+#[test]
+fn dynamic_jobs_report_their_figures() {
+    use garmentbake::batch::plan::{Job, Plan, Resources};
+    let dir = out_dir("batch_dynamic_figures");
+    let s = |p: PathBuf| p.to_string_lossy().into_owned();
+    let (body, skirt) = (s(sample("body.glb")), s(sample("garments/skirt.obj")));
+    let clip = s(sample("motions/131_01.bvh"));
+    let (sim, space, model, roll) = (
+        s(dir.join("sim.pc2")),
+        s(dir.join("space.safetensors")),
+        s(dir.join("dynamic.safetensors")),
+        s(dir.join("roll.pc2")),
+    );
+    // The dynamic tests' six frames and cache (simulated once per build).
+    let cache = s(root().join("target/test-out/sim-cache"));
+    let steps: [(&str, &str, Vec<&str>); 4] = [
+        (
+            "simulate",
+            "simulate:skirt:131_01",
+            vec![
+                "simulate",
+                "--body",
+                &body,
+                "--garment",
+                &skirt,
+                "--motion",
+                &clip,
+                "--fps",
+                "30",
+                "--frames",
+                "6",
+                "--settle",
+                "0.1",
+                "--blend",
+                "0.2",
+                "--cache",
+                &cache,
+                "--out",
+                &sim,
+            ],
+        ),
+        (
+            "train-dynamic",
+            "train-dynamic:skirt:space",
+            vec![
+                "train-dynamic",
+                "--body",
+                &body,
+                "--garment",
+                &skirt,
+                "--motion",
+                &clip,
+                "--sim",
+                &sim,
+                "--fps",
+                "30",
+                "--epochs",
+                "0",
+                "--batch",
+                "2",
+                "--threads",
+                "1",
+                "--out",
+                &space,
+            ],
+        ),
+        (
+            "train-dynamic",
+            "train-dynamic:skirt:dynamic",
+            vec![
+                "train-dynamic",
+                "--stage",
+                "dynamic",
+                "--from",
+                &space,
+                "--motion",
+                &clip,
+                "--sim",
+                &sim,
+                "--fps",
+                "30",
+                "--epochs",
+                "0",
+                "--threads",
+                "1",
+                "--out",
+                &model,
+            ],
+        ),
+        (
+            "rollout",
+            "rollout:skirt:131_01",
+            vec![
+                "rollout",
+                "--model",
+                &model,
+                "--motion",
+                &clip,
+                "--init",
+                &sim,
+                "--reference",
+                &sim,
+                "--frames",
+                "6",
+                "--threads",
+                "1",
+                "--out",
+                &roll,
+            ],
+        ),
+    ];
+    let jobs: Vec<Job> = steps
+        .iter()
+        .map(|(kind, id, args)| {
+            let file = id.replace(':', ".");
+            Job {
+                id: id.to_string(),
+                kind: kind.to_string(),
+                garment: "skirt".into(),
+                clip: None,
+                args: args
+                    .iter()
+                    .map(|a| a.to_string())
+                    .chain(["--json".into()])
+                    .collect(),
+                inputs: vec![],
+                outputs: vec![],
+                report: dir.join(format!("reports/{file}.json")),
+                log: dir.join(format!("logs/{file}.log")),
+                deps: vec![],
+                resources: Resources { cpus: 1, gpus: 0 },
+                key: format!("test {id}"),
+            }
+        })
+        .collect();
+    let plan = Plan {
+        schema: garmentbake::batch::plan::SCHEMA.into(),
+        tool_version: garmentbake::batch::plan::TOOL_VERSION.into(),
+        tools: None,
+        manifest: dir.join("none.toml"),
+        out: dir.clone(),
+        jobs,
+    };
+    let saved = dir.join("plan.json");
+    std::fs::write(&saved, serde_json::to_vec_pretty(&plan).unwrap()).unwrap();
+    let mut seen = Vec::new();
+    for (_, id, _) in &steps {
+        let out = garmentbake(&["batch", "job", "--plan", &s(saved.clone()), "--id", id]);
+        let outcome: Value = serde_json::from_slice(&out.stdout).unwrap_or(Value::Null);
+        assert_eq!(outcome["status"], "ran", "{id}: {outcome:#}");
+        seen.push(figures(&outcome));
+    }
+    assert_eq!(
+        seen,
+        [
+            vec!["s_per_frame"],
+            vec!["train_mm"],
+            vec!["train_mm"],
+            vec!["inside_pct", "vs_sim_mm"],
+        ]
+    );
+}
+
+/// A plan asks the Blender its simulations will run (`$GARMENTBAKE_BLENDER`, else PATH) for its
+/// version and keys them on it: another Blender (a wrapper reporting another version) changes
+/// the keys of the simulation and of the jobs that read it, no other; the plan records both
+/// tools. (Before, no key held Blender's version: an upgraded Blender's run found every
+/// simulation up to date.)
+#[test]
+fn simulation_keys_follow_the_blender_that_will_run_them() {
+    let dir = tiny("batch_blender");
+    let manifest = std::fs::read_to_string(dir.join("batch.toml")).unwrap();
+    let dynamic = "\n[garments.dynamic]\ntrain = [\"131_01\"]\nrollout = [\"131_01\"]\nfps = 30\nframes = 6\nspace_epochs = 0\ndynamic_epochs = 0\n";
+    std::fs::write(dir.join("batch.toml"), manifest + dynamic).unwrap();
+    let next = dir.join("blender-next");
+    std::fs::write(
+        &next,
+        "#!/bin/sh\nif [ \"$1\" = --version ]; then echo 'Blender 99.0.0 (test wrapper)'; exit 0; fi\nexec blender \"$@\"\n",
+    )
+    .unwrap();
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::set_permissions(&next, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let plan = |blender: Option<&Path>| -> Value {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_garmentbake"));
+        c.args(["batch", "plan"])
+            .arg(dir.join("batch.toml"))
+            .arg("--json");
+        if let Some(b) = blender {
+            c.env("GARMENTBAKE_BLENDER", b);
+        }
+        serde_json::from_slice(&crate::common::run_ok(&mut c).stdout).unwrap()
+    };
+    let (installed, wrapped) = (plan(None), plan(Some(&next)));
+    assert!(
+        installed["tools"]["blender"]
+            .as_str()
+            .unwrap()
+            .starts_with("Blender "),
+        "{}",
+        installed["tools"]
+    );
+    assert_eq!(wrapped["tools"]["blender"], "Blender 99.0.0 (test wrapper)");
+    assert_eq!(installed["tools"]["build"], wrapped["tools"]["build"]);
+    let changed: Vec<&str> = installed["jobs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(wrapped["jobs"].as_array().unwrap())
+        .filter(|(a, b)| a["key"] != b["key"])
+        .map(|(a, _)| a["id"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        changed,
+        [
+            "simulate:skirt:131_01",
+            "train-dynamic:skirt:space",
+            "train-dynamic:skirt:dynamic",
+            "rollout:skirt:131_01"
+        ]
+    );
+}

@@ -276,3 +276,68 @@ fn failures_name_their_cause_and_write_nothing() {
     let err = run(&[], &inside);
     assert!(err.contains("inside the body"), "{err}");
 }
+
+/// The cache reads a repeat back, and keys on which Blender simulates as well as on the job:
+/// the same request to another Blender (here a wrapper reporting another version) simulates
+/// again. (Before, the key held the job and the package version only, and an upgraded
+/// Blender's request was served the old Blender's frames.)
+#[test]
+fn the_cache_reads_a_repeat_back_and_simulates_again_for_another_blender() {
+    let dir = out_dir("sim_cache");
+    let obj = patch(&dir, "patch", [1.5, 1.2, 0.0], 0.3, 6);
+    let fabric = still_air(&dir);
+    let cache = dir.join("cache");
+    let next = dir.join("blender-next");
+    std::fs::write(
+        &next,
+        "#!/bin/sh\n# Blender itself, reporting another version.\n\
+         if [ \"$1\" = --version ]; then echo 'Blender 99.0.0 (test wrapper)'; exit 0; fi\n\
+         exec blender \"$@\"\n",
+    )
+    .unwrap();
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::set_permissions(&next, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let pc2 = dir.join("patch.pc2");
+    let simulate = |extra: &[&str]| {
+        let mut args = vec![
+            "simulate",
+            "--body",
+            "samples/body.glb",
+            "--garment",
+            obj.to_str().unwrap(),
+            "--config",
+            fabric.to_str().unwrap(),
+            "--motion",
+            "samples/motions/131_01.bvh",
+            "--fps",
+            "30",
+            "--frames",
+            "4",
+            "--settle",
+            "0",
+            "--blend",
+            "0",
+            "--threads",
+            "1",
+            "--cache",
+            cache.to_str().unwrap(),
+            "--out",
+            pc2.to_str().unwrap(),
+            "--json",
+        ];
+        args.extend_from_slice(extra);
+        let report = garmentbake_json(&args);
+        (report, std::fs::read(&pc2).unwrap())
+    };
+    let (first, frames) = simulate(&[]);
+    assert_eq!(first["cached"], false);
+    let (repeat, repeated) = simulate(&[]);
+    assert_eq!(repeat["cached"], true, "the same request is read back");
+    assert_eq!(repeat["cache_key"], first["cache_key"]);
+    assert_eq!(repeated, frames);
+    let (other, _) = simulate(&["--blender", next.to_str().unwrap()]);
+    assert_eq!(other["cached"], false, "another Blender simulates again");
+    assert_ne!(other["cache_key"], first["cache_key"]);
+    let (other_repeat, _) = simulate(&["--blender", next.to_str().unwrap()]);
+    assert_eq!(other_repeat["cached"], true);
+}
