@@ -140,7 +140,7 @@ fn sequences(file: &ModelFile, pairs: &[(String, String)], fps: f32) -> Result<V
             Sequence::load(
                 Path::new(m),
                 Path::new(s),
-                &[],
+                &Default::default(),
                 skeleton,
                 Some(fps),
                 vertices,

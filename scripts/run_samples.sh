@@ -26,6 +26,10 @@ done
 node tools/node/validate.mjs out/skirt.glb
 .venv/bin/python tools/usd/check.py validate out/skirt.usdc
 
+echo "== a production rig: a Character Creator take (cm, 99 joints, Z-up root, no T-pose) on the body"
+$gb pose --body samples/body.glb --motion samples/motions/cc_base_002_01.bvh --out out/cc_base_002_01.glb
+node tools/node/validate.mjs out/cc_base_002_01.glb
+
 echo "== pictures"
 $gb preview --body samples/body.glb --motion samples/motions/131_02.bvh --frames 6 --out out/131_02_body.png
 echo "outputs: $(cd out && ls | tr '\n' ' ')"

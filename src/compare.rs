@@ -21,6 +21,9 @@ use nalgebra::Matrix4;
 use serde::Serialize;
 use std::path::PathBuf;
 
+/// The name the runs' mean garment is scored under (`Settings::with_mean`).
+pub const RUNS_MEAN: &str = "runs-mean";
+
 /// One cache compared: its frames (the clip's, frame 0 its start) and, for a dynamic model, the
 /// model that played it, which e(k) restarts from each simulation's state.
 pub struct Cache {
@@ -54,6 +57,9 @@ pub struct Settings {
     pub max_lag_s: f32,
     /// How a restarted dynamic model plays (the collision fix as `rollout`'s).
     pub rollout: crate::rollout::Settings,
+    /// Also score the runs' vertex-wise mean garment, named [`RUNS_MEAN`]: the blur that wins
+    /// whole-clip distance, for scale.
+    pub with_mean: bool,
     /// Where to draw e(k) and the hem traces (PNG).
     pub horizon_png: Option<PathBuf>,
     pub hem_png: Option<PathBuf>,
@@ -228,7 +234,13 @@ pub fn compare(inputs: &Inputs, settings: &Settings) -> Result<Report> {
     let simulations_inside_pct =
         inputs.simulations.iter().map(|s| inside(s)).sum::<f64>() / n as f64;
     let mut caches = Vec::new();
-    for cache in inputs.caches {
+    let mean = settings.with_mean.then(|| Cache {
+        name: RUNS_MEAN.into(),
+        frames: ensemble.mean().to_vec(),
+        model: None,
+    });
+    let all: Vec<&Cache> = inputs.caches.iter().chain(mean.as_ref()).collect();
+    for &cache in &all {
         let horizon_mm = match &cache.model {
             Some(model) => restarted_horizon(
                 model,
@@ -295,7 +307,7 @@ pub fn compare(inputs: &Inputs, settings: &Settings) -> Result<Report> {
             .map(|(i, r)| (format!("sim {i}"), forward(r)))
             .collect();
         traces.push(("sims mean".into(), forward(&runs_mean)));
-        for c in inputs.caches {
+        for c in &all {
             traces.push((c.name.clone(), forward(&residual(&c.frames))));
         }
         crate::preview::save_png(&hem_chart(&report, &traces, n), path)
@@ -453,7 +465,7 @@ fn hem_chart(r: &Report, traces: &[(String, Vec<f64>)], runs: usize) -> image::R
         &Chart {
             title: "hem residual power spectrum (to 5 Hz)".into(),
             x_label: "Hz".into(),
-            y_label: "mm2 per bin".into(),
+            y_label: "mm2".into(),
             lines,
             y_from_zero: true,
         },

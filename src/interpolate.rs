@@ -17,19 +17,19 @@ pub struct LatentPath {
 
 /// Clip frame `a + k` decodes `(1 − t)·z_a + t·z_b` with `t = k / (b − a)`, skinned by that
 /// frame's seeds: the body keeps moving while the garment's latent goes in a straight line from
-/// the encoding of `garment_a` (at pose `a`) to that of `garment_b` (at pose `b`).
+/// the encoding of the simulated garment at frame `a` to that of frame `b`. `sim` may hold
+/// fewer frames than `poses` (a simulation of the clip's first frames); both ends must be in it.
 pub fn between(
     file: &ModelFile,
     poses: &[Vec<JointTransform>],
-    (a, garment_a): (usize, &[[f32; 3]]),
-    (b, garment_b): (usize, &[[f32; 3]]),
+    sim: &[Vec<[f32; 3]>],
+    (a, b): (usize, usize),
 ) -> Result<LatentPath> {
-    if a >= b || b >= poses.len() {
-        bail!(
-            "frames {a} and {b}: need a < b < {} (the clip's frames)",
-            poses.len()
-        );
+    let frames = poses.len().min(sim.len());
+    if a >= b || b >= frames {
+        bail!("frames {a} and {b}: need a < b < {frames} (the frames simulated)");
     }
+    let (garment_a, garment_b) = (&sim[a], &sim[b]);
     let space = &file.dynamic()?.space;
     let info = file.info.dynamic()?;
     let seeds = Seeds::from_vertices(&file.body, &info.seeds, &info.seed_parts)?;

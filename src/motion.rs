@@ -1,43 +1,100 @@
 //! Loading motion clips onto a skeleton: read the BVH, resolve its joint names, retarget.
 
 use crate::io::bvh::Bvh;
-use crate::io::joint_map::{self, JointMap};
-use crate::rig::retarget::{retarget, Retargeted};
+use crate::io::joint_map::{self, ClipJoints, JointMap};
+use crate::rig::capture::ClipAxes;
+use crate::rig::retarget::{check_drive, retarget, JointFate, JointMapping, Retargeted};
 use crate::rig::{JointTransform, Skeleton};
 use anyhow::{bail, Result};
 use std::path::Path;
 
-/// Reads `--map` files (each applies to the clips whose joint names it covers).
-pub fn read_maps(paths: &[impl AsRef<Path>]) -> Result<Vec<JointMap>> {
-    Ok(paths
+/// How clips are read: the `--map` files (each applies to the clips whose joints it names) and
+/// what the user says of axes and units (`--up`, `--units`; detected when not given).
+#[derive(Clone, Debug, Default)]
+pub struct ClipReader {
+    pub maps: Vec<JointMap>,
+    pub axes: ClipAxes,
+}
+
+impl ClipReader {
+    pub fn with_axes(mut self, axes: ClipAxes) -> ClipReader {
+        self.axes = axes;
+        self
+    }
+}
+
+/// Reads `--map` files into a [`ClipReader`] that detects axes and units.
+pub fn read_maps(paths: &[impl AsRef<Path>]) -> Result<ClipReader> {
+    Ok(ClipReader {
+        maps: paths
+            .iter()
+            .map(|p| JointMap::read(p.as_ref()))
+            .collect::<Result<_, _>>()?,
+        axes: ClipAxes::default(),
+    })
+}
+
+/// What one clip joint became under the resolved map (`inspect --map`).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct JointFateLine {
+    pub joint: String,
+    /// `LeftUpLeg`, `folded into CC_Base_Hip`, `dropped` ...
+    pub became: String,
+}
+
+/// The map a clip resolves to, what each of its joints became, and how it was read.
+pub fn clip_joint_fates(
+    path: &Path,
+    reader: &ClipReader,
+    skeleton: &Skeleton,
+) -> Result<(Retargeted, Vec<JointFateLine>)> {
+    let bvh = Bvh::read(path)?;
+    let (clip, mapping) = retarget_bvh(path, &bvh, reader, skeleton)?;
+    let lines = mapping
+        .fates
         .iter()
-        .map(|p| JointMap::read(p.as_ref()))
-        .collect::<Result<_, _>>()?)
+        .zip(&bvh.joints)
+        .map(|(fate, j)| JointFateLine {
+            joint: j.name.clone(),
+            became: match fate {
+                JointFate::Mapped { rig } => skeleton.joint_names[*rig].clone(),
+                JointFate::Folded { into, explicit } => format!(
+                    "folded into {}{}",
+                    into.map_or("the root (turns the whole clip)", |k| bvh.joints[k]
+                        .name
+                        .as_str()),
+                    if *explicit { " (fold)" } else { "" }
+                ),
+                JointFate::Dropped { explicit: true } => "dropped (skip)".to_string(),
+                JointFate::Dropped { explicit: false } => "dropped".to_string(),
+            },
+        })
+        .collect();
+    Ok((clip, lines))
+}
+
+/// A draft joint map for a clip (`garmentbake map suggest`).
+pub fn suggest_map(path: &Path) -> Result<crate::io::map_suggest::Suggestion> {
+    let bvh = Bvh::read(path)?;
+    let names: Vec<&str> = bvh.joints.iter().map(|j| j.name.as_str()).collect();
+    let parents: Vec<Option<usize>> = bvh.joints.iter().map(|j| j.parent).collect();
+    Ok(crate::io::map_suggest::suggest(
+        &path.display().to_string(),
+        &names,
+        &parents,
+    )?)
 }
 
 /// A clip retargeted onto `skeleton`, optionally resampled to `fps` (an integer divisor of the
 /// source rate: frames are kept, never interpolated).
 pub fn load_clip(
     path: &Path,
-    maps: &[JointMap],
+    reader: &ClipReader,
     skeleton: &Skeleton,
     fps: Option<f32>,
 ) -> Result<Retargeted> {
     let bvh = Bvh::read(path)?;
-    if bvh.frame_count() < 2 {
-        bail!(
-            "{}: needs at least 2 frames, has {}",
-            path.display(),
-            bvh.frame_count()
-        );
-    }
-    let names: Vec<&str> = bvh.joints.iter().map(|j| j.name.as_str()).collect();
-    let rig: Vec<&str> = skeleton.joint_names.iter().map(String::as_str).collect();
-    let name = path
-        .file_stem()
-        .map_or("clip".into(), |s| s.to_string_lossy().into_owned());
-    let resolved = joint_map::resolve(&path.display().to_string(), &names, &rig, maps)?;
-    let mut clip = retarget(&bvh.capture(), &resolved, skeleton, &name);
+    let (mut clip, _) = retarget_bvh(path, &bvh, reader, skeleton)?;
     if let Some(fps) = fps {
         let step = clip.animation.fps / fps;
         if fps <= 0.0 || (step - step.round()).abs() > 1e-3 || step < 1.0 {
@@ -51,6 +108,37 @@ pub fn load_clip(
         clip.animation = clip.animation.subsampled(0, step.round() as usize);
     }
     Ok(clip)
+}
+
+/// Resolves the clip's map, checks it drives the body, retargets.
+fn retarget_bvh(
+    path: &Path,
+    bvh: &Bvh,
+    reader: &ClipReader,
+    skeleton: &Skeleton,
+) -> Result<(Retargeted, JointMapping)> {
+    if bvh.frame_count() < 2 {
+        bail!(
+            "{}: needs at least 2 frames, has {}",
+            path.display(),
+            bvh.frame_count()
+        );
+    }
+    let names: Vec<&str> = bvh.joints.iter().map(|j| j.name.as_str()).collect();
+    let parents: Vec<Option<usize>> = bvh.joints.iter().map(|j| j.parent).collect();
+    let rig: Vec<&str> = skeleton.joint_names.iter().map(String::as_str).collect();
+    let name = path
+        .file_stem()
+        .map_or("clip".into(), |s| s.to_string_lossy().into_owned());
+    let joints = ClipJoints {
+        names: &names,
+        parents: &parents,
+    };
+    let resolved = joint_map::resolve(&path.display().to_string(), joints, &rig, &reader.maps)?;
+    check_drive(&resolved, skeleton)
+        .map_err(|e| anyhow::anyhow!("{}: map '{}': {e}", path.display(), resolved.map_name))?;
+    let clip = retarget(&bvh.capture(), &resolved, skeleton, &name, reader.axes);
+    Ok((clip, resolved))
 }
 
 /// Clips played one after another as one pose sequence: each clip after the first is moved

@@ -76,6 +76,16 @@ impl FileKind {
         EXTENSIONS.iter().copied().find(|(e, _, _)| *e == ext)
     }
 
+    /// The extensions garmentbake writes for `kinds` (lower case, no dot), e.g. for the checks
+    /// of an [`atomic::OutputSet`].
+    pub fn written_extensions(kinds: &[FileKind]) -> Vec<&'static str> {
+        EXTENSIONS
+            .iter()
+            .filter(|(_, k, w)| *w && kinds.contains(k))
+            .map(|(e, _, _)| *e)
+            .collect()
+    }
+
     /// `.a, .b or .c`: the extensions of `kinds` (written ones only with `written`), for messages.
     pub fn extension_list(kinds: &[FileKind], written: bool) -> String {
         let exts: Vec<String> = EXTENSIONS

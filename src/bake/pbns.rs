@@ -182,26 +182,22 @@ pub fn bake(
         let mut anim = animation_asset(clip);
         anim.blend_shape_weights = vec![(0, w.iter().flatten().copied().collect())];
         asset.animations.push(anim);
-        let network = Replay::new(&basis, x, &network_skin);
+        // The network's own forward pass, not the basis and skin the bake was made from: a
+        // fault in reading those out of the network would be on both sides of the comparison.
+        let network = clip_forward(network, model.skeleton(), clip, device);
         let baked = Replay::new(&targets, w, &skin);
         let pruning = pruned.then(|| {
             let uncorrected = Replay::new(&basis, x, &skin);
             replay_error(
                 model.skeleton(),
-                (&model.garment.positions, &model.garment.positions),
+                &model.garment.positions,
                 clip,
                 &network,
                 &uncorrected,
             )
             .max_error_m
         });
-        let mut error = replay_error(
-            model.skeleton(),
-            (&model.garment.positions, &base.positions),
-            clip,
-            &network,
-            &baked,
-        );
+        let mut error = replay_error(model.skeleton(), &base.positions, clip, &network, &baked);
         error.pruning_error_m = pruning;
         report.clips.push(error);
     }
@@ -306,14 +302,27 @@ impl<'a> Replay<'a> {
     }
 }
 
-/// World-space distance between the baked replay and the network, every frame of a clip; each
-/// plays its offsets on its own rest (network, baked): the bake's base mesh holds the part of the
-/// offsets its weights no longer carry.
+/// The network's forward pass on every frame of a clip (world space), `[frame][vertex]`.
+fn clip_forward(
+    network: &Pbns,
+    skeleton: &Skeleton,
+    clip: &SkelAnimation,
+    device: Device,
+) -> Vec<Vec<[f32; 3]>> {
+    let poses: Vec<_> = (0..clip.frame_count())
+        .map(|f| clip.local_pose(f))
+        .collect();
+    network.forward_points(&network.batch(skeleton, &poses, device))
+}
+
+/// World-space distance between the baked replay (its offsets played on `baked_rest`: the
+/// bake's base mesh holds the part of the offsets its weights no longer carry) and the network's
+/// frames, every frame of a clip.
 fn replay_error(
     skeleton: &Skeleton,
-    (rest, baked_rest): (&[[f32; 3]], &[[f32; 3]]),
+    baked_rest: &[[f32; 3]],
     clip: &SkelAnimation,
-    network: &Replay,
+    network: &[Vec<[f32; 3]>],
     baked: &Replay,
 ) -> ClipError {
     use rayon::prelude::*;
@@ -321,11 +330,12 @@ fn replay_error(
         .into_par_iter()
         .map(|f| {
             let skinning = skeleton.skinning_matrices(&clip.local_pose(f));
-            let (net, out) = (
-                network.frame(rest, f, &skinning),
-                baked.frame(baked_rest, f, &skinning),
-            );
-            let d: Vec<f32> = net.iter().zip(&out).map(|(a, b)| dist(a, b)).collect();
+            let out = baked.frame(baked_rest, f, &skinning);
+            let d: Vec<f32> = network[f]
+                .iter()
+                .zip(&out)
+                .map(|(a, b)| dist(a, b))
+                .collect();
             (
                 d.iter().copied().fold(0.0, f32::max),
                 d.iter().sum::<f32>() / d.len().max(1) as f32,

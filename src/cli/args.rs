@@ -6,6 +6,66 @@ use crate::train::pbns::{set_training_threads, InputFiles, Inputs, RefreshMode, 
 use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
 
+/// How a number flag is checked while the command line is parsed: NaN and infinities are never
+/// a setting, and rates, scales and learning rates must also be above 0.
+#[derive(Clone, Copy)]
+pub struct FiniteNumber<T> {
+    above_zero: bool,
+    kind: std::marker::PhantomData<T>,
+}
+
+/// A finite number above 0 (rates, tolerances, scales, learning rates, radii).
+pub const fn positive<T>() -> FiniteNumber<T> {
+    FiniteNumber {
+        above_zero: true,
+        kind: std::marker::PhantomData,
+    }
+}
+
+/// A finite number of 0 or more (seconds, weights, ridges, margins, shares where 0 means "off").
+pub const fn non_negative<T>() -> FiniteNumber<T> {
+    FiniteNumber {
+        above_zero: false,
+        kind: std::marker::PhantomData,
+    }
+}
+
+impl<T> clap::builder::TypedValueParser for FiniteNumber<T>
+where
+    T: std::str::FromStr + Into<f64> + Copy + Clone + Send + Sync + 'static,
+{
+    type Value = T;
+
+    fn parse_ref(
+        &self,
+        cmd: &clap::Command,
+        arg: Option<&clap::Arg>,
+        value: &std::ffi::OsStr,
+    ) -> std::result::Result<T, clap::Error> {
+        let text = value.to_string_lossy();
+        let parsed = text.trim().parse::<T>().ok().filter(|v| {
+            let x: f64 = (*v).into();
+            x.is_finite() && (x > 0.0 || (!self.above_zero && x == 0.0))
+        });
+        parsed.ok_or_else(|| {
+            // The flag and the value first, as every other bad-input line names what was given.
+            let flag = arg
+                .and_then(|a| a.get_long())
+                .map_or_else(|| "value".to_string(), |l| format!("--{l}"));
+            let want = if self.above_zero {
+                "a finite number above 0"
+            } else {
+                "a finite number, 0 or more"
+            };
+            clap::Error::raw(
+                clap::error::ErrorKind::ValueValidation,
+                format!("{flag} {text}: give {want}\n"),
+            )
+            .with_cmd(cmd)
+        })
+    }
+}
+
 /// The motion-capture clips a command reads, and how.
 #[derive(clap::Args)]
 pub struct ClipArgs {
@@ -17,21 +77,48 @@ pub struct ClipArgs {
     #[arg(long = "map")]
     pub maps: Vec<PathBuf>,
     /// Keep every n-th frame so clips play at this rate (must divide the source rate).
-    #[arg(long)]
+    #[arg(long, value_parser = positive::<f32>())]
     pub fps: Option<f32>,
+    /// The clips' up axis (y, z, -y, x ...); detected from the motion when left out (the axis the
+    /// head stays above the feet along). Z-up clips are turned a quarter turn about X.
+    #[arg(long, value_parser = parse_up)]
+    pub up: Option<crate::rig::capture::UpAxis>,
+    /// The clips' length unit (m, cm, mm, in, ft, cmu); detected from the leg length when left
+    /// out. Only reported lengths use it: motion is scaled to the body by leg length.
+    #[arg(long, value_parser = parse_units)]
+    pub units: Option<crate::rig::capture::Units>,
+}
+
+pub fn parse_up(text: &str) -> Result<crate::rig::capture::UpAxis, String> {
+    crate::rig::capture::UpAxis::parse(text)
+        .ok_or_else(|| format!("'{text}': give x, y, z, -x, -y or -z"))
+}
+
+pub fn parse_units(text: &str) -> Result<crate::rig::capture::Units, String> {
+    crate::rig::capture::Units::parse(text)
+        .ok_or_else(|| format!("'{text}': give m, cm, mm, in, ft or cmu"))
 }
 
 impl ClipArgs {
+    /// The maps and axes every clip of the command is read with.
+    pub fn reader(&self) -> Result<crate::motion::ClipReader> {
+        Ok(
+            crate::motion::read_maps(&self.maps)?.with_axes(crate::rig::capture::ClipAxes {
+                up: self.up,
+                units: self.units,
+            }),
+        )
+    }
+
     /// The one clip of a command that reads exactly one, retargeted onto `skeleton` at --fps.
     pub fn load_single(
         &self,
         skeleton: &crate::rig::Skeleton,
     ) -> Result<(&Path, crate::rig::retarget::Retargeted)> {
         let motion = self.single()?;
-        let maps = crate::motion::read_maps(&self.maps)?;
         Ok((
             motion,
-            crate::motion::load_clip(motion, &maps, skeleton, self.fps)?,
+            crate::motion::load_clip(motion, &self.reader()?, skeleton, self.fps)?,
         ))
     }
 
@@ -89,11 +176,11 @@ pub struct CollisionFixArgs {
     #[arg(long, default_value_t = 20)]
     pub collision_iterations: usize,
     /// Clearance the collision fix keeps from the body (mm).
-    #[arg(long, default_value_t = 2.0)]
+    #[arg(long, default_value_t = 2.0, value_parser = non_negative::<f32>())]
     pub collision_margin_mm: f32,
     /// Weight of the collision fix's edge-length term, which keeps the pushed-out garment from
     /// stretching; 0 gives the paper's objective (position + Laplacian + collision only).
-    #[arg(long, default_value_t = crate::rollout::LAMBDA_EDGES)]
+    #[arg(long, default_value_t = crate::rollout::LAMBDA_EDGES, value_parser = non_negative::<f64>())]
     pub collision_edge_weight: f64,
 }
 
@@ -142,7 +229,7 @@ pub struct TrainInputs {
     #[arg(long, default_value_t = TRAIN_DEFAULTS.batch)]
     pub batch: usize,
     /// Initial Adam learning rate (cosine decay to a tenth).
-    #[arg(long, default_value_t = TRAIN_DEFAULTS.learning_rate)]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.learning_rate, value_parser = positive::<f64>())]
     pub lr: f64,
     /// MLP width = number of PSD blend shapes.
     #[arg(long, default_value_t = TRAIN_DEFAULTS.width)]
@@ -154,7 +241,7 @@ pub struct TrainInputs {
     #[arg(long)]
     pub fixed_weights: bool,
     /// Pose balancing threshold (radians, per rotation component of the garment's joints).
-    #[arg(long, default_value_t = TRAIN_DEFAULTS.pose_threshold)]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.pose_threshold, value_parser = non_negative::<f32>())]
     pub pose_threshold: f32,
     /// Extra training poses per balanced one, each taking every limb chain (legs, spine, neck and
     /// head, arms) from a different real frame: covers pose combinations the clips lack.
@@ -165,7 +252,12 @@ pub struct TrainInputs {
     /// garment's joints (hips, knees, spine, ...) uniformly across the rotation range the clips
     /// show, widened by 30 % of it on each side: wide stances, knee raises and deep bends the
     /// clips do not combine. The real poses stay in, so common poses keep their accuracy.
-    #[arg(long, default_value_t = TRAIN_DEFAULTS.coverage, value_name = "PER_REAL_POSE")]
+    #[arg(
+        long,
+        default_value_t = TRAIN_DEFAULTS.coverage,
+        value_name = "PER_REAL_POSE",
+        value_parser = non_negative::<f32>()
+    )]
     pub coverage: f32,
     /// Epochs between refreshes of the nearest-body-vertex candidates.
     #[arg(long, default_value_t = TRAIN_DEFAULTS.refresh_every)]
@@ -178,11 +270,11 @@ pub struct TrainInputs {
     #[arg(long, default_value_t = TRAIN_DEFAULTS.candidates)]
     pub candidates: usize,
     /// Learning rate of the blend-weight logits relative to --lr.
-    #[arg(long, default_value_t = TRAIN_DEFAULTS.weights_lr_scale)]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.weights_lr_scale, value_parser = non_negative::<f64>())]
     pub weights_lr_scale: f64,
     /// Initial blend weights: copy the body's within this distance (metres) of it at rest and
     /// interpolate them smoothly over the garment beyond (a skirt's hanging part).
-    #[arg(long, default_value_t = TRAIN_DEFAULTS.inpaint_beyond.unwrap())]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.inpaint_beyond.unwrap(), value_parser = non_negative::<f32>())]
     pub inpaint_beyond: f32,
     /// Copy the body's weights by proximity everywhere (no inpainting).
     #[arg(long)]
@@ -244,6 +336,50 @@ impl TrainInputs {
         };
         Ok((inputs, settings, warnings))
     }
+}
+
+/// What an output flag writes, for [`output_set`].
+#[derive(Clone, Copy)]
+pub enum Writes {
+    Kinds(&'static [exporters::FileKind]),
+    /// A page (`--view PAGE.html`).
+    Page,
+}
+
+impl Writes {
+    fn extensions(self) -> Vec<&'static str> {
+        match self {
+            Writes::Kinds(kinds) => exporters::FileKind::written_extensions(kinds),
+            Writes::Page => vec!["html", "htm"],
+        }
+    }
+}
+
+/// A point cache: .pc2, .mdd or .usda/.usdc/.usdz.
+pub const POINT_CACHE: Writes = Writes::Kinds(&[
+    exporters::FileKind::Pc2,
+    exporters::FileKind::Mdd,
+    exporters::FileKind::Usd,
+]);
+
+/// A command's outputs, `(flag, path if given, what it writes)`, checked before its work and
+/// written all or none (exporters::atomic::OutputSet).
+pub fn output_set(
+    outputs: &[(&str, Option<&Path>, Writes)],
+) -> Result<exporters::atomic::OutputSet> {
+    let extensions: Vec<Vec<&str>> = outputs.iter().map(|o| o.2.extensions()).collect();
+    let planned: Vec<exporters::atomic::Planned> = outputs
+        .iter()
+        .zip(&extensions)
+        .filter_map(|(&(flag, path, _), extensions)| {
+            path.map(|path| exporters::atomic::Planned {
+                flag,
+                path,
+                extensions,
+            })
+        })
+        .collect();
+    Ok(exporters::atomic::OutputSet::check(&planned)?)
 }
 
 /// A per-frame point cache of `mesh`'s vertices, in the format the extension names.

@@ -6,7 +6,7 @@ use super::Execute;
 use crate::bake::pbns::{bake, BakeOptions, BakeReport, Targets};
 use crate::eval::ClipCoverage;
 
-use crate::motion::{load_clip, read_maps};
+use crate::motion::load_clip;
 use crate::validate::Validation;
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
@@ -37,7 +37,7 @@ pub struct Args {
     #[arg(long, conflicts_with = "tolerance_mm")]
     pub max_targets: Option<usize>,
     /// Keep the fewest blend shapes whose max offset error over the clips is within this (mm).
-    #[arg(long)]
+    #[arg(long, value_parser = super::args::positive::<f32>())]
     pub tolerance_mm: Option<f32>,
     /// Joint influences per vertex in the file (default: the model's own, which loses nothing).
     #[arg(long)]
@@ -139,11 +139,17 @@ impl Execute for Args {
     type Report = Report;
 
     fn execute(&self, _say: &dyn Fn(&str)) -> Result<Report> {
-        if let Some(page) = &self.view {
-            super::view::check_page_path(page)?;
-        }
+        use exporters::FileKind::{Gltf, Usd};
+        let outputs = super::args::output_set(&[
+            (
+                "--out",
+                Some(&self.out),
+                super::args::Writes::Kinds(&[Gltf, Usd]),
+            ),
+            ("--view", self.view.as_deref(), super::args::Writes::Page),
+        ])?;
         let (model, device) = self.compute.load_model(&self.model)?;
-        let maps = read_maps(&self.clips.maps)?;
+        let maps = self.clips.reader()?;
         let clips = self
             .clips
             .motions
@@ -164,27 +170,30 @@ impl Execute for Args {
         };
         let (asset, report) = bake(&model, &clips, &opts, device)?;
         let coverage = ClipCoverageLine::of_clips(&model, &clips)?;
-        exporters::write(&asset, &self.out)
-            .with_context(|| format!("writing {}", self.out.display()))?;
+        let written = outputs.write(&self.out, |p| {
+            exporters::write(&asset, p).with_context(|| format!("writing {}", p.display()))?;
+            Ok::<_, anyhow::Error>(p.to_path_buf())
+        })?;
+        let view = match &self.view {
+            Some(page) => {
+                // A USD bake gets its page from the same asset as glTF.
+                let glb = if is_glb(&self.out) {
+                    std::fs::read(&written)
+                        .with_context(|| format!("cannot read {}", self.out.display()))?
+                } else {
+                    exporters::gltf::to_glb(&asset)
+                };
+                let title = self.out.file_name().unwrap_or_default().to_string_lossy();
+                let bytes = outputs.write(page, |p| super::view::glb_page(p, &glb, &title))?;
+                Some((page.clone(), bytes))
+            }
+            None => None,
+        };
+        outputs.commit()?;
         let validation = self
             .validate
             .then(|| self.check_written(&model, &clips, device))
             .transpose()?;
-        let view = match &self.view {
-            Some(page) => {
-                // A USD bake gets its page from the same asset as glTF.
-                let glb = match exporters::FileKind::of(&self.out) {
-                    Some(exporters::FileKind::Gltf) if is_glb(&self.out) => {
-                        std::fs::read(&self.out)
-                            .with_context(|| format!("cannot read {}", self.out.display()))?
-                    }
-                    _ => exporters::gltf::to_glb(&asset),
-                };
-                let title = self.out.file_name().unwrap_or_default().to_string_lossy();
-                Some((page.clone(), super::view::glb_page(page, &glb, &title)?))
-            }
-            None => None,
-        };
         Ok(Report {
             out: self.out.clone(),
             bytes: std::fs::metadata(&self.out).map(|m| m.len()).unwrap_or(0),

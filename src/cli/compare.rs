@@ -60,8 +60,12 @@ pub struct Args {
     #[arg(long, default_value_t = 50)]
     pub restart_every: usize,
     /// The hem's lag behind the pelvis is looked for within ± this many seconds.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = super::args::positive::<f32>())]
     pub max_lag: f32,
+    /// Also score the simulations' vertex-wise mean garment (as `runs-mean`): the blurred
+    /// average that wins whole-clip distance without being a garment, for scale.
+    #[arg(long)]
+    pub with_mean: bool,
     /// Draw e(k) beside the simulations' divergence (PNG).
     #[arg(long, value_name = "PNG")]
     pub plot_horizon: Option<PathBuf>,
@@ -122,6 +126,9 @@ impl Execute for Args {
             .map(|c| named("--cache", c))
             .collect::<Result<_>>()?;
         for (i, (name, _)) in names.iter().enumerate() {
+            if self.with_mean && *name == crate::compare::RUNS_MEAN {
+                bail!("--cache {name}=…: the name --with-mean gives the runs' mean garment");
+            }
             if names[..i].iter().any(|(n, _)| n == name) {
                 bail!("--cache {name}=…: the name is given twice");
             }
@@ -222,6 +229,7 @@ impl Execute for Args {
             horizon: self.horizon,
             restart_every: self.restart_every,
             max_lag_s: self.max_lag,
+            with_mean: self.with_mean,
             rollout: self.collision.settings(!self.no_collision_fix)?,
             horizon_png: self.plot_horizon.clone(),
             hem_png: self.plot_hem.clone(),

@@ -162,9 +162,12 @@ impl Execute for Args {
     type Report = Report;
 
     fn execute(&self, _say: &dyn Fn(&str)) -> Result<Report> {
-        if let Some(page) = &self.view {
-            super::view::check_page_path(page)?;
-        }
+        use super::args::{output_set, Writes, POINT_CACHE};
+        let outputs = output_set(&[
+            ("--out", Some(&self.out), POINT_CACHE),
+            ("--body-out", self.body_out.as_deref(), POINT_CACHE),
+            ("--view", self.view.as_deref(), Writes::Page),
+        ])?;
         let (mut model, device) = self.compute.load_model(&self.model)?;
         if self.clamp_weights && model.coverage.is_none() {
             bail!(
@@ -205,24 +208,29 @@ impl Execute for Args {
         // Per frame once: the coverage split below means subsets of the same figures.
         let per_frame = compare_frames(&geometry, &[&garment, &lbs], &body, &under, &poses);
         let comparison = Comparison::of(&per_frame.iter().collect::<Vec<_>>(), 2);
-        write_cache(&self.out, &model.garment, &garment, anim.fps)?;
+        outputs.write(&self.out, |p| {
+            write_cache(p, &model.garment, &garment, anim.fps)
+        })?;
         if let Some(path) = &self.body_out {
             let frames = lbs_frames(&body.skin, &body.mesh.positions, &body.skeleton, &poses);
-            write_cache(path, &body.mesh, &frames, anim.fps)?;
+            outputs.write(path, |p| write_cache(p, &body.mesh, &frames, anim.fps))?;
         }
         let view = match &self.view {
             Some(page) => {
-                let bytes = super::view::cache_page(
-                    page,
-                    (&body, &model.garment),
-                    (&anim.name, anim.fps, &poses),
-                    ("network", &garment),
-                    None,
-                )?;
+                let bytes = outputs.write(page, |p| {
+                    super::view::cache_page(
+                        p,
+                        (&body, &model.garment),
+                        (&anim.name, anim.fps, &poses),
+                        ("network", &garment),
+                        None,
+                    )
+                })?;
                 Some((page.clone(), bytes))
             }
             None => None,
         };
+        outputs.commit()?;
         let coverage = model.coverage.as_ref().map(|c| {
             let clip = ClipCoverage::of(c, &network.feature_joints, &poses);
             let split = |frames: Vec<usize>| {

@@ -21,6 +21,19 @@ pub struct Args {
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
+    /// BVH: also read the clip onto this body (.glb) and print what each clip joint became (the
+    /// rig joint it drives, folded, dropped), the map, up axis, units and rest pose.
+    #[arg(long)]
+    pub body: Option<PathBuf>,
+    /// BVH with --body: joint map(s) to try first (see `garmentbake map suggest`).
+    #[arg(long = "map", requires = "body")]
+    pub maps: Vec<PathBuf>,
+    /// BVH with --body: the clip's up axis (detected when left out).
+    #[arg(long, requires = "body", value_parser = super::args::parse_up)]
+    pub up: Option<crate::rig::capture::UpAxis>,
+    /// BVH with --body: the clip's length unit (detected when left out).
+    #[arg(long, requires = "body", value_parser = super::args::parse_units)]
+    pub units: Option<crate::rig::capture::Units>,
 }
 
 impl Execute for Args {
@@ -30,7 +43,7 @@ impl Execute for Args {
         let path = &self.file;
         match FileKind::of(path) {
             Some(FileKind::Gltf) => gltf_report(path),
-            Some(FileKind::Bvh) => bvh_report(path),
+            Some(FileKind::Bvh) => bvh_report(path, self),
             Some(FileKind::Obj) => obj_report(path),
             Some(FileKind::Model) => model_report(path, self.json),
             _ => bail!(
@@ -84,13 +97,29 @@ fn gltf_report(path: &Path) -> Result<Value> {
     )
 }
 
-fn bvh_report(path: &Path) -> Result<Value> {
+fn bvh_report(path: &Path, args: &Args) -> Result<Value> {
     let bvh = Bvh::read(path)?;
-    Ok(json!({
+    let mut report = json!({
         "file": path.display().to_string(),
         "joints": bvh.joints.iter().map(|j| j.name.clone()).collect::<Vec<_>>(),
         "frames": bvh.frame_count(), "fps": bvh.fps(), "duration_s": bvh.duration(),
-    }))
+    });
+    if let Some(body) = &args.body {
+        let body = crate::io::gltf_body::read_body(body)?;
+        let reader =
+            crate::motion::read_maps(&args.maps)?.with_axes(crate::rig::capture::ClipAxes {
+                up: args.up,
+                units: args.units,
+            });
+        let (clip, fates) = crate::motion::clip_joint_fates(path, &reader, &body.skeleton)?;
+        report["map"] = json!(clip.reading.describe(&clip.map_name));
+        report["reading"] = json!(clip.reading);
+        report["joints"] = json!(fates
+            .iter()
+            .map(|f| format!("{} -> {}", f.joint, f.became))
+            .collect::<Vec<_>>());
+    }
+    Ok(report)
 }
 
 fn obj_report(path: &Path) -> Result<Value> {

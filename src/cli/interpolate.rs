@@ -7,7 +7,7 @@ use crate::io::point_cache::read_pc2;
 use crate::metrics::vertex_distances_mm;
 use crate::motion::{load_clip, read_maps};
 use crate::simulate::stats::{self, FrameStats, Series};
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use serde::Serialize;
 use std::path::PathBuf;
 
@@ -98,7 +98,8 @@ impl Execute for Args {
                 clip.frame_count()
             );
         }
-        let path = between(&file, &poses, (a, &sim[a]), (b, &sim[b]))?;
+        let path =
+            between(&file, &poses, &sim, (a, b)).with_context(|| format!("--between {a},{b}"))?;
         write_cache(&self.out, &file.garment, &path.frames, fps)?;
         let (per_frame, summary) = stats::of(
             &Series::unpinned(&file.body, &file.garment, fps),

@@ -8,6 +8,7 @@ pub mod compare;
 pub mod eval;
 pub mod inspect;
 pub mod interpolate;
+pub mod map;
 pub mod pose;
 pub mod preview;
 pub mod rollout;
@@ -83,6 +84,7 @@ enum Command {
     Rollout(rollout::Args),
     Compare(compare::Args),
     Interpolate(interpolate::Args),
+    Map(map::Args),
     Bench(bench::Args),
     Batch(batch::Args),
     Validate(validate::Args),
@@ -90,9 +92,18 @@ enum Command {
     Upgrade(upgrade::Args),
 }
 
+/// The whole command line as clap sees it (every command and flag), for tests that go through
+/// all of them.
+pub fn command() -> clap::Command {
+    <Cli as clap::CommandFactory>::command()
+}
+
 /// Runs the CLI; errors are one line on stderr and exit code 2 (1 is left for failed checks).
 pub fn main() -> i32 {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => return usage_error(e),
+    };
     crate::progress::set_quiet(cli.quiet);
     let result = match cli.command {
         Command::Inspect(a) => run(&a, a.json),
@@ -106,6 +117,7 @@ pub fn main() -> i32 {
         Command::Rollout(a) => run(&a, a.output.json),
         Command::Compare(a) => run(&a, a.output.json),
         Command::Interpolate(a) => run(&a, a.output.json),
+        Command::Map(a) => run(&a, a.json()),
         Command::Bench(a) => run(&a, a.json()),
         Command::Batch(a) => run(&a, a.json()),
         Command::Validate(a) => run(&a, a.output.json),
@@ -119,6 +131,30 @@ pub fn main() -> i32 {
             2
         }
     }
+}
+
+/// A command line clap refused: help and --version print as usual; a bad flag or value is one
+/// `error:` line (clap's first paragraph, without the usage and tips that follow), exit code 2.
+fn usage_error(e: clap::Error) -> i32 {
+    use clap::error::ErrorKind;
+    if matches!(
+        e.kind(),
+        ErrorKind::DisplayHelp
+            | ErrorKind::DisplayVersion
+            | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+    ) {
+        e.exit();
+    }
+    let text = e.render().to_string();
+    let first: Vec<&str> = text
+        .lines()
+        .map(str::trim)
+        .take_while(|l| !l.is_empty())
+        .collect();
+    let line = first.join(" ");
+    let line = line.strip_prefix("error: ").unwrap_or(&line);
+    eprintln!("error: {line}");
+    2
 }
 
 /// The error chain on one line, outermost first, without repeating a cause already quoted.

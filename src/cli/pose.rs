@@ -4,7 +4,8 @@ use super::args::{ClipArgs, OutputArgs};
 use super::Execute;
 use crate::bake::{animation_asset, skeleton_asset, skinned_mesh_asset, BODY_COLOR};
 use crate::io::gltf_body::read_body;
-use crate::motion::{load_clip, read_maps};
+use crate::motion::load_clip;
+use crate::rig::retarget::ClipReading;
 use anyhow::{Context, Result};
 use serde::Serialize;
 use std::path::PathBuf;
@@ -46,6 +47,8 @@ pub struct ClipReport {
     /// Metres per clip unit.
     pub scale: f32,
     pub floor_offset_m: f32,
+    /// Axes, units, rest pose and joint fates as read.
+    pub reading: ClipReading,
 }
 
 impl Execute for Args {
@@ -53,7 +56,7 @@ impl Execute for Args {
 
     fn execute(&self, say: &dyn Fn(&str)) -> Result<Report> {
         let body = read_body(&self.body)?;
-        let maps = read_maps(&self.clips.maps)?;
+        let reader = self.clips.reader()?;
         let mut asset = exporters::BakedAsset {
             skeleton: skeleton_asset(&body.skeleton),
             meshes: vec![skinned_mesh_asset(
@@ -77,7 +80,7 @@ impl Execute for Args {
         );
         for path in motions {
             bar.inc(1);
-            let clip = load_clip(path, &maps, &body.skeleton, self.clips.fps)?;
+            let clip = load_clip(path, &reader, &body.skeleton, self.clips.fps)?;
             let a = &clip.animation;
             let r = ClipReport {
                 clip: path.clone(),
@@ -87,10 +90,17 @@ impl Execute for Args {
                 map: clip.map_name.clone(),
                 scale: clip.scale,
                 floor_offset_m: clip.floor_offset,
+                reading: clip.reading.clone(),
             };
             say(&format!(
-                "{}: {} frames at {} fps ({:.2} s), map {}, {:.4} m per unit, floor offset {:+.3} m",
-                path.display(), r.frames, r.fps, r.duration_s, r.map, r.scale, r.floor_offset_m
+                "{}: {} frames at {} fps ({:.2} s), {:.4} m per unit, floor offset {:+.3} m; {}",
+                path.display(),
+                r.frames,
+                r.fps,
+                r.duration_s,
+                r.scale,
+                r.floor_offset_m,
+                r.reading.describe(&r.map)
             ));
             clips.push(r);
             asset.animations.push(animation_asset(a));

@@ -58,10 +58,10 @@ pub struct Args {
     #[arg(long, value_name = "REF.pc2")]
     pub error_vs: Option<PathBuf>,
     /// The distance (mm) drawn red by --error-vs.
-    #[arg(long, default_value_t = 50.0)]
+    #[arg(long, default_value_t = 50.0, value_parser = super::args::positive::<f64>())]
     pub error_scale_mm: f64,
     /// Resample the clip to this rate (the rate the caches were written at).
-    #[arg(long)]
+    #[arg(long, value_parser = super::args::positive::<f32>())]
     pub fps: Option<f32>,
     /// Trained PBNS model (.safetensors): draw its garment posed by the clip.
     #[arg(long)]

@@ -63,7 +63,7 @@ pub struct Args {
     pub out: PathBuf,
     /// glTF output: keep the fewest blend shapes whose replay stays within this distance (mm) of
     /// every rolled-out vertex.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = super::args::positive::<f32>())]
     pub tolerance_mm: f32,
     /// glTF output: store the blend shapes as 32-bit floats instead of 16-bit integers. By
     /// default they are quantized (KHR_mesh_quantization: half the bytes, the rounding counted
@@ -103,9 +103,9 @@ pub struct Args {
     /// --reference, the simulation beside it and error colours against it.
     #[arg(long, value_name = "PAGE.html")]
     pub view: Option<PathBuf>,
-    /// Check what was written as `garmentbake validate` does: its structure and (a point cache)
-    /// that it plays the roll-out just computed within --tolerance-mm at every frame; exit 1
-    /// when it fails.
+    /// Check what was written as `garmentbake validate` does: its structure, and that it plays
+    /// the roll-out just computed within --tolerance-mm at every frame (a glTF evaluated as the
+    /// spec says, a point cache read back); exit 1 when it fails.
     #[arg(long)]
     pub validate: bool,
     /// Skip the per-frame collision fix.
@@ -248,27 +248,21 @@ impl Execute for Args {
     type Report = Report;
 
     fn execute(&self, say: &dyn Fn(&str)) -> Result<Report> {
+        use super::args::{output_set, Writes, POINT_CACHE};
+        let kinds = &[FileKind::Pc2, FileKind::Mdd, FileKind::Usd, FileKind::Gltf];
+        let outputs = output_set(&[
+            ("--out", Some(&self.out), Writes::Kinds(kinds)),
+            ("--lbs-out", self.lbs_out.as_deref(), POINT_CACHE),
+            ("--body-out", self.body_out.as_deref(), POINT_CACHE),
+            ("--view", self.view.as_deref(), Writes::Page),
+        ])?;
         let kind = FileKind::written(&self.out);
-        if !matches!(
-            kind,
-            Some(FileKind::Pc2 | FileKind::Mdd | FileKind::Usd | FileKind::Gltf)
-        ) {
-            let kinds = [FileKind::Pc2, FileKind::Mdd, FileKind::Usd, FileKind::Gltf];
-            bail!(
-                "{}: the roll-out is written as {}",
-                self.out.display(),
-                FileKind::extension_list(&kinds, true)
-            );
-        }
         if self.with_body && kind != Some(FileKind::Usd) {
             bail!(
                 "{}: --with-body needs a USD --out ({}): PC2, MDD and glTF caches hold one mesh (use --body-out)",
                 self.out.display(),
                 FileKind::extension_list(&[FileKind::Usd], true)
             );
-        }
-        if let Some(page) = &self.view {
-            super::view::check_page_path(page)?;
         }
         let (file, _device) = self.compute.load_model(&self.model)?;
         let dynamic = file.dynamic()?;
@@ -344,39 +338,19 @@ impl Execute for Args {
         let body = &file.body;
         let bodies = (self.body_out.is_some() || self.with_body)
             .then(|| lbs_frames(&body.skin, &body.mesh.positions, skeleton, &poses));
-        let baked = match (kind, &bodies) {
-            (Some(FileKind::Gltf), _) => {
-                Some(self.write_gltf(&file, &poses, &rollout.frames, fps, say)?)
-            }
+        let baked = outputs.write(&self.out, |out| match (kind, &bodies) {
+            (Some(FileKind::Gltf), _) => self
+                .write_gltf(out, &file, &poses, &rollout.frames, fps, say)
+                .map(Some),
             (_, Some(b)) if self.with_body => {
                 let meshes = [
                     ("garment", &file.garment, rollout.frames.as_slice()),
                     ("body", &body.mesh, b.as_slice()),
                 ];
-                write_caches(&self.out, &meshes, fps)?;
-                None
+                write_caches(out, &meshes, fps).map(|()| None)
             }
-            _ => {
-                write_cache(&self.out, &file.garment, &rollout.frames, fps)?;
-                None
-            }
-        };
-        // A point cache holds the frames themselves; a glTF's vertices are the bake's (structure).
-        let validation = self
-            .validate
-            .then(|| {
-                let written = (kind != Some(FileKind::Gltf)).then(|| {
-                    Reference::of_frames(
-                        "roll-out",
-                        rollout.frames.clone(),
-                        fps,
-                        file.garment.triangles.clone(),
-                    )
-                });
-                check_file(&self.out, written.as_ref(), f64::from(self.tolerance_mm))
-                    .map(|c| c.validation(Some("roll-out".into())))
-            })
-            .transpose()?;
+            _ => write_cache(out, &file.garment, &rollout.frames, fps).map(|()| None),
+        })?;
         let lbs = (self.lbs_out.is_some() || reference.is_some())
             .then(|| {
                 let skin = Self::garment_skin(&file)?;
@@ -385,27 +359,45 @@ impl Execute for Args {
             })
             .transpose()?;
         if let (Some(path), Some(lbs)) = (&self.lbs_out, &lbs) {
-            write_cache(path, &file.garment, lbs, fps)?;
+            outputs.write(path, |p| write_cache(p, &file.garment, lbs, fps))?;
         }
         if let (Some(path), Some(b)) = (&self.body_out, &bodies) {
-            write_cache(path, &body.mesh, b, fps)?;
+            outputs.write(path, |p| write_cache(p, &body.mesh, b, fps))?;
         }
-        let (first, lbs_reference, all) =
-            self.versus_references(&references, &rollout.frames, lbs.as_deref());
         let view = match &self.view {
             Some(page) => {
                 let names: Vec<String> = clips.iter().map(|c| c.name.clone()).collect();
-                let bytes = super::view::cache_page(
-                    page,
-                    (&file.body, &file.garment),
-                    (&names.join(" + "), fps, &poses),
-                    ("roll-out", &rollout.frames),
-                    reference.map(|r| ("simulation", r.as_slice())),
-                )?;
+                let bytes = outputs.write(page, |p| {
+                    super::view::cache_page(
+                        p,
+                        (&file.body, &file.garment),
+                        (&names.join(" + "), fps, &poses),
+                        ("roll-out", &rollout.frames),
+                        reference.map(|r| ("simulation", r.as_slice())),
+                    )
+                })?;
                 Some((page.clone(), bytes))
             }
             None => None,
         };
+        outputs.commit()?;
+        // The file must play the frames just rolled out: a point cache vertex for vertex, a
+        // glTF evaluated as the spec says (its seam-split vertices mapped by `sourceVertex`).
+        let validation = self
+            .validate
+            .then(|| {
+                let written = Reference::of_frames(
+                    "roll-out",
+                    rollout.frames.clone(),
+                    fps,
+                    file.garment.triangles.clone(),
+                );
+                check_file(&self.out, Some(&written), f64::from(self.tolerance_mm))
+                    .map(|c| c.validation(Some("roll-out".into())))
+            })
+            .transpose()?;
+        let (first, lbs_reference, all) =
+            self.versus_references(&references, &rollout.frames, lbs.as_deref());
         Ok(Report {
             motions: self.motions.clone(),
             fps,
@@ -582,6 +574,7 @@ impl Args {
     /// skeleton with the same fixed skin as the model's LBS baseline.
     fn write_gltf(
         &self,
+        out: &std::path::Path,
         file: &crate::models::file::ModelFile,
         poses: &[Vec<crate::rig::JointTransform>],
         frames: &[Vec<[f32; 3]>],
@@ -605,8 +598,7 @@ impl Args {
             ("generator".into(), "garmentbake rollout".into()),
             ("model".into(), self.model.display().to_string()),
         ];
-        exporters::write(&asset, &self.out)
-            .with_context(|| format!("writing {}", self.out.display()))?;
+        exporters::write(&asset, out).with_context(|| format!("writing {}", out.display()))?;
         Ok(report)
     }
 }

@@ -6,7 +6,7 @@ use crate::fabric::Fabric;
 use crate::garment::Garment;
 use crate::io::gltf_body::read_body;
 use crate::simulate::{self, cache, stats, Scene, Settings};
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
@@ -51,10 +51,10 @@ pub struct Args {
     #[arg(long)]
     pub frames: Option<usize>,
     /// Seconds the garment settles on the resting body before the lead-in blend.
-    #[arg(long, default_value_t = simulate::SETTLE_S)]
+    #[arg(long, default_value_t = simulate::SETTLE_S, value_parser = super::args::non_negative::<f32>())]
     pub settle: f32,
     /// Seconds of blending from the rest pose into the clip's first pose.
-    #[arg(long, default_value_t = simulate::BLEND_S)]
+    #[arg(long, default_value_t = simulate::BLEND_S, value_parser = super::args::non_negative::<f32>())]
     pub blend: f32,
     /// Run N of a perturbed ensemble (for `compare`): the rest hold before the blend lasts
     /// N × 0.1 s longer, so runs 0, 1, 2 … are independent draws of a chaotic garment on the
@@ -62,7 +62,7 @@ pub struct Args {
     #[arg(long, default_value_t = 0)]
     pub perturb: u32,
     /// Stop with an error when a vertex moves faster than this (m/s): the solver exploded.
-    #[arg(long, default_value_t = simulate::SPEED_LIMIT)]
+    #[arg(long, default_value_t = simulate::SPEED_LIMIT, value_parser = super::args::positive::<f32>())]
     pub speed_limit: f32,
     /// Cache folder for simulations.
     #[arg(long, default_value = cache::DEFAULT_DIR)]
@@ -127,14 +127,12 @@ impl Execute for Args {
 
     fn execute(&self, say: &dyn Fn(&str)) -> Result<Report> {
         let quiet = self.output.json;
-        exporters::FileKind::written(&self.out)
-            .filter(|k| matches!(k, exporters::FileKind::Pc2 | exporters::FileKind::Usd))
-            .with_context(|| {
-                format!(
-                    "--out {}: write a .pc2 or .usda/.usdc/.usdz point cache",
-                    self.out.display()
-                )
-            })?;
+        use super::args::{output_set, Writes, POINT_CACHE};
+        use exporters::FileKind::{Pc2, Usd};
+        let outputs = output_set(&[
+            ("--out", Some(&self.out), Writes::Kinds(&[Pc2, Usd])),
+            ("--body-out", self.body_out.as_deref(), POINT_CACHE),
+        ])?;
         let body = read_body(&self.body)?;
         let garment = Garment::read(&self.garment)?;
         if let Some(p) = garment.fit_problems(&body)?.first() {
@@ -164,10 +162,13 @@ impl Execute for Args {
         })?;
         bar.finish_and_clear();
         let fps = clip.animation.fps;
-        write_cache(&self.out, &garment.mesh, &outcome.garment, fps)?;
+        outputs.write(&self.out, |p| {
+            write_cache(p, &garment.mesh, &outcome.garment, fps)
+        })?;
         if let Some(path) = &self.body_out {
-            write_cache(path, &body.mesh, &outcome.body, fps)?;
+            outputs.write(path, |p| write_cache(p, &body.mesh, &outcome.body, fps))?;
         }
+        outputs.commit()?;
         let e = outcome.entry;
         Ok(Report {
             motion: motion.to_path_buf(),

@@ -70,7 +70,7 @@ pub struct Args {
     /// from there). Small: each garment vertex follows its nearest few seeds (a skirt's hem
     /// follows the thighs); large: it blends the seeds over a wider patch (the hem moves with
     /// the hips and both legs at once).
-    #[arg(long, default_value_t = 50.0)]
+    #[arg(long, default_value_t = 50.0, value_parser = super::args::positive::<f64>())]
     pub kernel_radius_mm: f64,
     /// Fabric the simulations used (recorded in the model).
     #[arg(long, default_value = "cotton")]
@@ -81,12 +81,12 @@ pub struct Args {
     #[arg(long)]
     pub batch: Option<usize>,
     /// Initial Adam learning rate, cosine decay to a tenth (space 3e-4, dynamic 1e-3).
-    #[arg(long)]
+    #[arg(long, value_parser = super::args::positive::<f64>())]
     pub lr: Option<f64>,
     /// Stage dynamic: pull of the fitted latent integrator towards keeping the previous latent
     /// (relative ridge penalty); stronger is steadier over long roll-outs, weaker follows the
     /// simulation closer one step ahead.
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(long, default_value_t = 0.1, value_parser = super::args::non_negative::<f64>())]
     pub ridge: f64,
     /// Stage dynamic: rounds of roll-out-aware fitting. Each round rolls the model out over the
     /// training clips (no collision fix) and refits the latent integrator on those self-made
@@ -104,7 +104,7 @@ pub struct Args {
     /// start for the first frames and cannot run away over long shots. Longer: more of the
     /// history's motion kept, more room to drift; 0: the pose alone. The regression's ridge is
     /// chosen leaving one training clip out. Implies --body-drive.
-    #[arg(long, default_value_t = 0.3, value_name = "SECONDS")]
+    #[arg(long, default_value_t = 0.3, value_name = "SECONDS", value_parser = super::args::non_negative::<f64>())]
     pub pose_settle: f64,
     /// Stage dynamic: no settling, the paper's integrator alone (with --rollout-rounds 3 by
     /// default to keep it stable).
@@ -113,7 +113,7 @@ pub struct Args {
     /// Stage dynamic, settling: the pose regression's ridge, relative to each pose input's mean
     /// square. Default: the one of 1e-3, 0.01, 0.1, 1, 10 whose fit on all training clips but
     /// one best predicts the clip left out (one clip: its halves).
-    #[arg(long, value_name = "R")]
+    #[arg(long, value_name = "R", value_parser = super::args::non_negative::<f64>())]
     pub pose_ridge: Option<f64>,
     /// Stage dynamic: the rounds' roll-outs run the collision fix, as `rollout` plays the
     /// model, so the integrator is refitted on the histories it meets at play time (the fix
@@ -139,7 +139,7 @@ pub struct Args {
     /// Stage dynamic, with --body-drive: ridge penalty on the drive's weights, relative to each
     /// drive input's own mean square (stronger: the drive nudges the integrator instead of
     /// steering it).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = super::args::non_negative::<f64>())]
     pub drive_ridge: f64,
     /// Stage dynamic: channels of the motion features `E_t`.
     #[arg(long, default_value_t = 16)]

@@ -50,7 +50,7 @@ pub struct Args {
     #[arg(long = "map")]
     pub maps: Vec<PathBuf>,
     /// The rate the file was baked at (--fps of bake); with --reference, the caches' rate.
-    #[arg(long)]
+    #[arg(long, value_parser = super::args::positive::<f32>())]
     pub fps: Option<f32>,
     /// A point cache (.pc2 / .mdd) the file must play frame for frame, vertex for vertex,
     /// instead of --model: a dynamic model's roll-out (its garment depends on where the roll-out
@@ -59,7 +59,7 @@ pub struct Args {
     #[arg(long, conflicts_with = "model")]
     pub reference: Option<PathBuf>,
     /// Largest replay error allowed, in millimetres.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = super::args::positive::<f64>())]
     pub tolerance_mm: f64,
     /// Write the worst frame, coloured by replay error (green: under a tenth of the tolerance,
     /// red: at or past it), as a PNG.
@@ -103,6 +103,8 @@ impl Args {
             motions: vec![motion.clone()],
             maps: self.maps.clone(),
             fps: self.fps,
+            up: None,
+            units: None,
         };
         let (_, clip) = clips.load_single(model.skeleton())?;
         Ok(Some(Reference::of(&model, &clip.animation, device)?))

@@ -40,10 +40,10 @@ pub struct Args {
     #[arg(long)]
     pub error_vs: Option<PathBuf>,
     /// Distance at the red end of the error colours (mm).
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, value_parser = super::args::positive::<f32>())]
     pub error_scale_mm: f32,
     /// Rate the caches play at (default: the selected clip's, or 30 without animations).
-    #[arg(long)]
+    #[arg(long, value_parser = super::args::positive::<f32>())]
     pub fps: Option<f32>,
     /// Write the page here (.html).
     #[arg(long)]

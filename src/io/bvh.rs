@@ -11,7 +11,7 @@
 
 use std::path::Path;
 
-use crate::rig::retarget::CaptureClip;
+use crate::rig::capture::{CaptureClip, RootOffset};
 use nalgebra::{UnitQuaternion, Vector3};
 use thiserror::Error;
 
@@ -231,14 +231,46 @@ impl Bvh {
     /// Local transform of `joint` at `frame`: translation (file units) and rotation relative to the
     /// parent. Channels apply in the order listed: `Zrotation Yrotation Xrotation` gives
     /// R = Rz·Ry·Rx (intrinsic, degrees). A position channel replaces the offset component it names;
-    /// components without one keep the offset.
+    /// components without one keep the offset. A root whose channels are relative to its OFFSET
+    /// ([`Bvh::root_offset`]) adds them to it.
     ///
     /// Panics if `frame` or `joint` is out of range, like slice indexing.
     pub fn local_pose(&self, frame: usize, joint: usize) -> (Vector3<f64>, UnitQuaternion<f64>) {
         let row = &self.frames[frame];
         let j = &self.joints[joint];
         let start = self.channel_offset(joint);
-        local_from_channels(j, &row[start..start + j.channels.len()])
+        let add = j.parent.is_none() && self.root_offset() == RootOffset::Added;
+        local_from_channels(j, &row[start..start + j.channels.len()], add)
+    }
+
+    /// How the root's OFFSET relates to its position channels. Exporters disagree: iClone and
+    /// Character Creator write channels relative to the OFFSET (the hip at OFFSET + channels),
+    /// others write the position itself and repeat it as the OFFSET. Channels that stay near the
+    /// OFFSET over the take hold the position; channels far from it are relative to it.
+    pub fn root_offset(&self) -> RootOffset {
+        let Some(root) = self.joints.first() else {
+            return RootOffset::Zero;
+        };
+        let offset = Vector3::from(root.offset);
+        if offset.norm() < 1e-9 {
+            return RootOffset::Zero;
+        }
+        // Compare on the axes the channels set; the others keep the OFFSET either way.
+        let (mut mean, mut on) = (Vector3::zeros(), Vector3::zeros());
+        let mut any = false;
+        for (i, ch) in root.channels.iter().enumerate() {
+            if !ch.is_rotation() {
+                any = true;
+                let n = self.frames.len().max(1) as f64;
+                mean[ch.axis()] = self.frames.iter().map(|f| f[i]).sum::<f64>() / n;
+                on[ch.axis()] = offset[ch.axis()];
+            }
+        }
+        if !any || (mean - on).norm() > 0.5 * on.norm() {
+            RootOffset::Added
+        } else {
+            RootOffset::Replaced
+        }
     }
 
     /// World positions of the joints in the rest pose (frame-independent): sums of offsets.
@@ -255,13 +287,22 @@ impl Bvh {
     ///
     /// Panics if `frame` is out of range.
     pub fn world_pose(&self, frame: usize) -> Vec<(Vector3<f64>, UnitQuaternion<f64>)> {
+        self.world_pose_with(frame, self.root_offset() == RootOffset::Added)
+    }
+
+    fn world_pose_with(
+        &self,
+        frame: usize,
+        add_root_offset: bool,
+    ) -> Vec<(Vector3<f64>, UnitQuaternion<f64>)> {
         let row = &self.frames[frame];
         let mut out: Vec<(Vector3<f64>, UnitQuaternion<f64>)> =
             Vec::with_capacity(self.joints.len());
         let mut start = 0;
         for j in &self.joints {
             let end = start + j.channels.len();
-            let (t, r) = local_from_channels(j, &row[start..end]);
+            let (t, r) =
+                local_from_channels(j, &row[start..end], add_root_offset && j.parent.is_none());
             start = end;
             // Parents precede children (parser guarantee); a hand-built Bvh that breaks this gets the
             // joint treated as a root rather than a panic.
@@ -276,24 +317,35 @@ impl Bvh {
 
     /// The clip in the format-neutral form retargeting takes.
     pub fn capture(&self) -> CaptureClip {
+        let root_offset = self.root_offset();
+        let add = root_offset == RootOffset::Added;
         CaptureClip {
-            rest_positions: self.world_rest_positions(),
+            zero_pose: self.world_rest_positions(),
+            zero_pose_rotation: UnitQuaternion::identity(),
             frames: (0..self.frame_count())
-                .map(|f| self.world_pose(f))
+                .map(|f| self.world_pose_with(f, add))
                 .collect(),
             frame_time: self.frame_time,
+            root_offset,
         }
     }
 }
 
-/// Local (translation, rotation) of one joint from its slice of a frame row.
-fn local_from_channels(joint: &BvhJoint, values: &[f64]) -> (Vector3<f64>, UnitQuaternion<f64>) {
+/// Local (translation, rotation) of one joint from its slice of a frame row; `add_offset`: position
+/// channels are relative to the OFFSET.
+fn local_from_channels(
+    joint: &BvhJoint,
+    values: &[f64],
+    add_offset: bool,
+) -> (Vector3<f64>, UnitQuaternion<f64>) {
     let mut t = Vector3::from(joint.offset);
     let mut r = UnitQuaternion::identity();
     for (&ch, &v) in joint.channels.iter().zip(values) {
         if ch.is_rotation() {
             // Right-multiplying composes intrinsic rotations in channel order.
             r *= axis_rotation(ch.axis(), v.to_radians());
+        } else if add_offset {
+            t[ch.axis()] = joint.offset[ch.axis()] + v;
         } else {
             t[ch.axis()] = v;
         }
@@ -930,7 +982,8 @@ mod tests {
     #[test]
     fn channel_order_is_respected_and_independent_of_layout() {
         // The same rotation Rz(30)·Rx(-50)·Ry(70), written with the channels in ZXY order and as a
-        // 6-channel root with positions interleaved: same rotation either way.
+        // 6-channel root with positions interleaved: same rotation either way. Positions far from
+        // the root's OFFSET (1, 2, 3) are relative to it.
         let a = one_joint("Zrotation Xrotation Yrotation", "30 -50 70");
         let b = one_joint(
             "Zrotation Xposition Xrotation Yposition Yrotation Zposition",
@@ -943,7 +996,12 @@ mod tests {
         assert!(same_rotation(ra, expect));
         assert!(same_rotation(rb, expect));
         assert_eq!(ta, Vector3::new(1.0, 2.0, 3.0));
-        assert_eq!(tb, Vector3::new(7.0, 8.0, 9.0));
+        assert_eq!(b.root_offset(), RootOffset::Added);
+        assert_eq!(tb, Vector3::new(8.0, 10.0, 12.0));
+        // Positions near the OFFSET hold the position itself (exporters that repeat it).
+        let c = one_joint("Xposition Yposition Zposition", "1.1 2.2 2.9");
+        assert_eq!(c.root_offset(), RootOffset::Replaced);
+        assert_eq!(c.local_pose(0, 0).0, Vector3::new(1.1, 2.2, 2.9));
     }
 
     #[test]
@@ -972,10 +1030,11 @@ mod tests {
 
     #[test]
     fn subset_of_channels() {
-        // Only Yposition and Yrotation: X and Z keep the offset.
+        // Only Yposition and Yrotation: X and Z keep the offset; Y (5, far from the OFFSET's 2)
+        // is relative to it.
         let b = one_joint("Yposition Yrotation", "5 90");
         let (t, r) = b.local_pose(0, 0);
-        assert_eq!(t, Vector3::new(1.0, 5.0, 3.0));
+        assert_eq!(t, Vector3::new(1.0, 7.0, 3.0));
         assert!(same_rotation(r, q_axis(Vector3::y(), 90.0)));
     }
 

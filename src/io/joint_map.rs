@@ -1,18 +1,29 @@
-//! Joint-name maps: rename a motion clip's joints onto the body rig's joints.
+//! Joint-name maps: which rig joint each motion-capture joint drives, and what becomes of the rest.
 //!
 //! A map file is TOML:
 //! ```toml
-//! name = "cmu_3dsmax"
+//! name = "cc_base"
+//! fold = ["CC_Base_Pelvis"]          # optional: joints composed into their chain
+//! skip = ["CC_Base_FacialBone", "CC_Base_*Twist01"]   # optional: joints dropped with their subtree
 //! [map]
-//! LeftCollar = "LeftShoulder"   # ClipJoint = "RigJoint"
+//! CC_Base_Hip = "Hips"               # ClipJoint = "RigJoint"
 //! ```
-//! Maps are strict: every clip joint must map to an existing rig joint and each rig joint is the
-//! target of at most one clip joint. Rig joints no clip joint reaches keep their rest pose.
+//! A map names only the joints that matter. Every other clip joint is *folded* when a mapped joint
+//! lies below it (its local rotation is composed into the chain: world rotations of the mapped
+//! joints below it include it, so a twist bone or a helper between thigh and calf loses nothing) and
+//! *dropped* otherwise (face, fingers, toes, twist leaves). `fold` and `skip` say so explicitly
+//! (`*` and `?` globs allowed); skipping a joint that has a mapped joint below it is an error, as is
+//! a literal `fold` entry with none. Each rig joint is the target of at most one clip joint; rig
+//! joints no clip joint reaches keep their rest pose relative to their parent.
 //!
-//! [`resolve`] picks the map for a clip: a user map (`--map`) that covers all the clip's joints, else a
-//! built-in map whose joints are exactly the clip's, else identity when every clip joint already has a
-//! rig joint's name, else an error telling the user to pass `--map`. Built-ins must match exactly
-//! because namings reuse each other's names for different joints (see `cmu_3dsmax.map.toml`).
+//! [`resolve`] picks the map for a clip: the first user map (`--map`) that covers the clip's joints
+//! or whose `[map]` joints all are clip joints; else a built-in map that *recognises* the clip (all
+//! its `[map]` joints present and every clip joint named by its `[map]`, `fold` or `skip`: the CMU
+//! maps list every joint, so they match their exact joint set, because those namings reuse each
+//! other's names for different joints, see `cmu_3dsmax.map.toml`); else identity when every clip
+//! joint already has a rig joint's name; else an error telling the user to pass `--map`. A user map
+//! meant for the clip (half its joints or more are clip joints) that names joints the clip lacks is
+//! an error naming them, not a silent fall back to a built-in.
 
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::path::Path;
@@ -20,17 +31,28 @@ use std::path::Path;
 use serde::Deserialize;
 use thiserror::Error;
 
-/// A named clip-joint → rig-joint renaming.
+pub use crate::rig::retarget::{JointFate, JointMapping};
+
+/// A named clip-joint → rig-joint renaming, with what to do with the joints it leaves out.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct JointMap {
     pub name: String,
     /// (clip joint, rig joint), sorted by clip joint.
     pub pairs: Vec<(String, String)>,
+    /// Clip joints (globs) composed into the chain of the mapped joints below them.
+    pub fold: Vec<String>,
+    /// Clip joints (globs) dropped with everything below them.
+    pub skip: Vec<String>,
     /// Where the map came from, for error messages (a path, or the sample path for built-ins).
     pub source: String,
 }
 
-use crate::rig::retarget::JointMapping;
+/// A clip's joint tree as resolving a map needs it: names and parents, parents first.
+#[derive(Debug, Clone, Copy)]
+pub struct ClipJoints<'a> {
+    pub names: &'a [&'a str],
+    pub parents: &'a [Option<usize>],
+}
 
 /// Why a joint map could not be read or applied. Every message is one line naming the file or clip.
 #[derive(Debug, Error)]
@@ -43,9 +65,9 @@ pub enum JointMapError {
         line: usize,
         detail: String,
     },
-    #[error("{file}: the [map] table is empty; list each clip joint as ClipJoint = \"RigJoint\"")]
+    #[error("{file}: the [map] table is empty; list each clip joint that matters as ClipJoint = \"RigJoint\"")]
     Empty { file: String },
-    #[error("{file}: empty joint name in the entry for '{clip}'; every clip joint must map to a rig joint")]
+    #[error("{file}: empty joint name in the entry for '{clip}'; every [map] entry must name a rig joint")]
     EmptyName { file: String, clip: String },
     #[error("{file}: rig joint '{rig}' is the target of both '{first}' and '{second}'; each rig joint may be mapped at most once")]
     DuplicateTarget {
@@ -63,7 +85,28 @@ pub enum JointMapError {
     },
     #[error("{clip}: has two joints named '{joint}'; joint names must be unique to be mapped")]
     DuplicateClipJoint { clip: String, joint: String },
-    #[error("{clip}: cannot match its joints to the rig: {detail}; pass --map FILE.toml with a [map] table naming a rig joint for each clip joint")]
+    #[error("{file}: names {joints}, which {clip} lacks; fix the names or leave them out (joints left out are folded or dropped)")]
+    MissingClipJoints {
+        file: String,
+        clip: String,
+        joints: String,
+    },
+    #[error("{file}: skips '{skipped}' of {clip}, but mapped joint '{mapped}' lies below it; fold it instead (leave it out of skip)")]
+    SkipsMapped {
+        file: String,
+        clip: String,
+        skipped: String,
+        mapped: String,
+    },
+    #[error(
+        "{file}: folds '{joint}' of {clip}, but no mapped joint lies below it; list it under skip"
+    )]
+    FoldsLeaf {
+        file: String,
+        clip: String,
+        joint: String,
+    },
+    #[error("{clip}: cannot match its joints to the rig: {detail}; pass --map FILE.toml with a [map] table naming a rig joint for each clip joint that matters (`garmentbake map suggest` drafts one)")]
     NoMap { clip: String, detail: String },
 }
 
@@ -72,10 +115,14 @@ pub enum JointMapError {
 #[serde(deny_unknown_fields)]
 struct MapFile {
     name: Option<String>,
+    #[serde(default)]
+    fold: Vec<String>,
+    #[serde(default)]
+    skip: Vec<String>,
     map: BTreeMap<String, String>,
 }
 
-const BUILTIN: [(&str, &str); 2] = [
+const BUILTIN: [(&str, &str); 4] = [
     (
         "samples/motions/cmu_mb.map.toml (built in)",
         include_str!("../../samples/motions/cmu_mb.map.toml"),
@@ -84,10 +131,18 @@ const BUILTIN: [(&str, &str); 2] = [
         "samples/motions/cmu_3dsmax.map.toml (built in)",
         include_str!("../../samples/motions/cmu_3dsmax.map.toml"),
     ),
+    (
+        "samples/motions/cc_base.map.toml (built in)",
+        include_str!("../../samples/motions/cc_base.map.toml"),
+    ),
+    (
+        "samples/motions/mixamo.map.toml (built in)",
+        include_str!("../../samples/motions/mixamo.map.toml"),
+    ),
 ];
 
-/// The maps shipped with the tool: CMU MotionBuilder naming (`cmu_mb`) and 3dsMax naming
-/// (`cmu_3dsmax`).
+/// The maps shipped with the tool: CMU MotionBuilder naming (`cmu_mb`), CMU 3dsMax naming
+/// (`cmu_3dsmax`), Character Creator (`cc_base`) and Mixamo (`mixamo`).
 pub fn builtin() -> Vec<JointMap> {
     // The embedded files are checked by tests; a broken one is skipped rather than panicking.
     BUILTIN
@@ -138,14 +193,16 @@ impl JointMap {
         Ok(JointMap {
             name,
             pairs: raw.map.into_iter().collect(),
+            fold: raw.fold,
+            skip: raw.skip,
             source: file(),
         })
     }
 
-    /// True when every clip joint is a key of the map (extra keys are allowed).
-    pub fn covers(&self, clip_joint_names: &[&str]) -> bool {
-        let keys = self.keys();
-        clip_joint_names.iter().all(|n| keys.contains(n))
+    /// True when the map names every clip joint: as a `[map]` key, by `fold` / `skip`, or below a
+    /// skipped joint (extra keys are allowed).
+    pub fn covers(&self, joints: ClipJoints) -> bool {
+        self.unnamed(joints).is_empty()
     }
 
     /// The rig joint a clip joint maps to.
@@ -160,34 +217,67 @@ impl JointMap {
         self.pairs.iter().map(|(c, _)| c.as_str()).collect()
     }
 
-    /// Same joint set as the clip: how a built-in map is chosen.
-    fn matches_exactly(&self, clip_joint_names: &[&str]) -> bool {
-        let clip: HashSet<&str> = clip_joint_names.iter().copied().collect();
-        self.keys() == clip
+    /// Named by a `fold` or `skip` pattern.
+    fn listed(&self, joint: &str) -> bool {
+        self.fold.iter().chain(&self.skip).any(|p| glob(p, joint))
     }
 
-    /// Clip joints this map has no entry for, in clip order.
-    fn missing<'c>(&self, clip_joint_names: &[&'c str]) -> Vec<&'c str> {
-        let keys = self.keys();
-        clip_joint_names
+    /// How a built-in map is chosen: all its `[map]` joints are clip joints and it names every clip
+    /// joint (for maps without fold / skip: the exact joint set).
+    fn recognises(&self, joints: ClipJoints) -> bool {
+        self.missing(joints.names).is_empty() && self.covers(joints)
+    }
+
+    /// `[map]` joints the clip lacks, sorted.
+    fn missing(&self, clip_joint_names: &[&str]) -> Vec<&str> {
+        let clip: HashSet<&str> = clip_joint_names.iter().copied().collect();
+        self.pairs
             .iter()
-            .copied()
-            .filter(|n| !keys.contains(n))
+            .map(|(c, _)| c.as_str())
+            .filter(|c| !clip.contains(c))
             .collect()
+    }
+
+    /// Clip joints this map does not name at all (nor skips an ancestor of), in clip order.
+    fn unnamed<'c>(&self, joints: ClipJoints<'c>) -> Vec<&'c str> {
+        let keys = self.keys();
+        let mut skipped = vec![false; joints.names.len()];
+        let mut out = Vec::new();
+        for (k, &name) in joints.names.iter().enumerate() {
+            let under_skip = joints.parents[k].is_some_and(|p| skipped[p]);
+            let skip = self.skip.iter().any(|p| glob(p, name)) && !keys.contains(name);
+            skipped[k] = under_skip || skip;
+            if !keys.contains(name) && !self.listed(name) && !under_skip {
+                out.push(name);
+            }
+        }
+        out
+    }
+
+    /// A user map meant for this clip: half its `[map]` joints or more are clip joints.
+    fn meant_for(&self, clip_joint_names: &[&str]) -> bool {
+        2 * self.missing(clip_joint_names).len() <= self.pairs.len()
     }
 
     fn apply(
         &self,
         clip: &str,
-        clip_joint_names: &[&str],
+        joints: ClipJoints,
         rig_joint_names: &[&str],
     ) -> Result<JointMapping, JointMapError> {
-        let targets = self.pairs.iter().map(|(c, r)| (c.as_str(), r.as_str()));
-        let lookup: HashMap<&str, &str> = targets.collect();
+        let lookup: HashMap<&str, &str> = self
+            .pairs
+            .iter()
+            .map(|(c, r)| (c.as_str(), r.as_str()))
+            .collect();
         let rig = rig_index(rig_joint_names);
-        let mut clip_to_rig = Vec::with_capacity(clip_joint_names.len());
-        for &name in clip_joint_names {
-            let target = lookup.get(name).copied().unwrap_or(name);
+        let mut targets = Vec::with_capacity(joints.names.len());
+        for &name in joints.names {
+            // Joints the map leaves out are folded or dropped (see `fates`).
+            let Some(&target) = lookup.get(name) else {
+                targets.push(None);
+                continue;
+            };
             let Some(&i) = rig.get(target) else {
                 return Err(JointMapError::UnknownRigJoint {
                     file: self.source.clone(),
@@ -196,50 +286,167 @@ impl JointMap {
                     hint: did_you_mean(target, rig_joint_names),
                 });
             };
-            clip_to_rig.push(Some(i));
+            targets.push(Some(i));
         }
-        check_unique(clip, clip_joint_names, &clip_to_rig)?;
+        check_unique(clip, joints.names, &targets)?;
+        let fates = self.fates(clip, joints, &targets)?;
         Ok(JointMapping {
             map_name: self.name.clone(),
-            clip_to_rig,
+            fates,
         })
+    }
+
+    /// The fate of every clip joint given the mapped ones.
+    fn fates(
+        &self,
+        clip: &str,
+        joints: ClipJoints,
+        targets: &[Option<usize>],
+    ) -> Result<Vec<JointFate>, JointMapError> {
+        let n = joints.names.len();
+        // The first mapped joint below each joint (clip order puts parents first).
+        let mut mapped_below: Vec<Option<usize>> = vec![None; n];
+        for k in (0..n).rev() {
+            if let Some(p) = joints.parents[k] {
+                let below = if targets[k].is_some() {
+                    Some(k)
+                } else {
+                    mapped_below[k]
+                };
+                if mapped_below[p].is_none() {
+                    mapped_below[p] = below;
+                }
+            }
+        }
+        let mut fates: Vec<JointFate> = Vec::with_capacity(n);
+        for k in 0..n {
+            let name = joints.names[k];
+            let parent_fate = joints.parents[k].map(|p| &fates[p]);
+            if targets[k].is_none()
+                && mapped_below[k].is_none()
+                && self.fold.iter().any(|p| p == name)
+            {
+                return Err(JointMapError::FoldsLeaf {
+                    file: self.source.clone(),
+                    clip: clip.to_string(),
+                    joint: name.to_string(),
+                });
+            }
+            let fate = if let Some(rig) = targets[k] {
+                JointFate::Mapped { rig }
+            } else if let Some(JointFate::Dropped { .. }) = parent_fate {
+                JointFate::Dropped { explicit: false }
+            } else if self.skip.iter().any(|p| glob(p, name)) {
+                if let Some(m) = mapped_below[k] {
+                    return Err(JointMapError::SkipsMapped {
+                        file: self.source.clone(),
+                        clip: clip.to_string(),
+                        skipped: name.to_string(),
+                        mapped: joints.names[m].to_string(),
+                    });
+                }
+                JointFate::Dropped { explicit: true }
+            } else {
+                let explicit = self.fold.iter().any(|p| glob(p, name));
+                match mapped_below[k] {
+                    Some(_) => JointFate::Folded {
+                        into: nearest_mapped_ancestor(k, joints.parents, &fates),
+                        explicit,
+                    },
+                    None => JointFate::Dropped { explicit: false },
+                }
+            };
+            fates.push(fate);
+        }
+        Ok(fates)
     }
 }
 
-/// Chooses and applies the joint map for one clip (`clip` names it in errors):
-/// the first user map that covers the clip's joints, else a built-in map with exactly the clip's
-/// joints, else identity if every clip joint is named like a rig joint, else an error.
+fn nearest_mapped_ancestor(
+    k: usize,
+    parents: &[Option<usize>],
+    fates: &[JointFate],
+) -> Option<usize> {
+    let mut at = parents[k];
+    while let Some(p) = at {
+        if matches!(fates[p], JointFate::Mapped { .. }) {
+            return Some(p);
+        }
+        at = parents[p];
+    }
+    None
+}
+
+/// `*` any run of characters, `?` one character; everything else literal.
+fn glob(pattern: &str, name: &str) -> bool {
+    let p: Vec<char> = pattern.chars().collect();
+    let s: Vec<char> = name.chars().collect();
+    // Classic two-pointer match with backtracking to the last `*`.
+    let (mut i, mut j) = (0, 0);
+    let mut star: Option<(usize, usize)> = None;
+    while j < s.len() {
+        if i < p.len() && (p[i] == '?' || p[i] == s[j]) {
+            i += 1;
+            j += 1;
+        } else if i < p.len() && p[i] == '*' {
+            star = Some((i, j));
+            i += 1;
+        } else if let Some((si, sj)) = star {
+            i = si + 1;
+            j = sj + 1;
+            star = Some((si, sj + 1));
+        } else {
+            return false;
+        }
+    }
+    p[i..].iter().all(|&c| c == '*')
+}
+
+/// Chooses and applies the joint map for one clip (`clip` names it in errors): the first user map
+/// that covers the clip's joints or whose `[map]` joints are all clip joints, else a built-in map
+/// that recognises the clip, else identity if every clip joint is named like a rig joint, else an
+/// error.
 pub fn resolve(
     clip: &str,
-    clip_joint_names: &[&str],
+    joints: ClipJoints,
     rig_joint_names: &[&str],
     user_maps: &[JointMap],
 ) -> Result<JointMapping, JointMapError> {
-    if let Some(m) = user_maps.iter().find(|m| m.covers(clip_joint_names)) {
-        return m.apply(clip, clip_joint_names, rig_joint_names);
+    let names = joints.names;
+    if let Some(m) = user_maps
+        .iter()
+        .find(|m| m.covers(joints) || m.missing(names).is_empty())
+    {
+        return m.apply(clip, joints, rig_joint_names);
+    }
+    if let Some(m) = user_maps.iter().find(|m| m.meant_for(names)) {
+        return Err(JointMapError::MissingClipJoints {
+            file: m.source.clone(),
+            clip: clip.to_string(),
+            joints: list(&m.missing(names)),
+        });
     }
     let builtins = builtin();
-    if let Some(m) = builtins
-        .iter()
-        .find(|m| m.matches_exactly(clip_joint_names))
-    {
-        return m.apply(clip, clip_joint_names, rig_joint_names);
+    if let Some(m) = builtins.iter().find(|m| m.recognises(joints)) {
+        return m.apply(clip, joints, rig_joint_names);
     }
     let rig = rig_index(rig_joint_names);
-    if clip_joint_names.iter().all(|n| rig.contains_key(n)) {
-        let clip_to_rig: Vec<Option<usize>> = clip_joint_names
-            .iter()
-            .map(|n| rig.get(n).copied())
-            .collect();
-        check_unique(clip, clip_joint_names, &clip_to_rig)?;
+    if names.iter().all(|n| rig.contains_key(n)) {
+        let targets: Vec<Option<usize>> = names.iter().map(|n| rig.get(n).copied()).collect();
+        check_unique(clip, names, &targets)?;
         return Ok(JointMapping {
             map_name: "identity".to_string(),
-            clip_to_rig,
+            fates: targets
+                .into_iter()
+                .map(|t| JointFate::Mapped {
+                    rig: t.expect("every name is a rig joint"),
+                })
+                .collect(),
         });
     }
     Err(JointMapError::NoMap {
         clip: clip.to_string(),
-        detail: no_map_detail(clip_joint_names, &rig, user_maps, &builtins),
+        detail: no_map_detail(joints, &rig, user_maps, &builtins),
     })
 }
 
@@ -276,11 +483,12 @@ fn check_unique(
 /// Explains the failure through the closest map when that narrows it down, else lists the clip
 /// joints the rig does not know.
 fn no_map_detail(
-    clip_joint_names: &[&str],
+    joints: ClipJoints,
     rig: &HashMap<&str, usize>,
     user_maps: &[JointMap],
     builtins: &[JointMap],
 ) -> String {
+    let clip_joint_names = joints.names;
     let unknown: Vec<&str> = clip_joint_names
         .iter()
         .copied()
@@ -289,30 +497,23 @@ fn no_map_detail(
     let closest = user_maps
         .iter()
         .chain(builtins)
-        .map(|m| (m, m.missing(clip_joint_names)))
-        .min_by_key(|(_, missing)| missing.len());
+        .map(|m| (m, m.unnamed(joints)))
+        .min_by_key(|(_, unnamed)| unnamed.len());
     match closest {
-        Some((m, missing)) if missing.is_empty() => {
-            // Only a built-in can get here: it knows every clip joint but has more.
-            let clip: HashSet<&str> = clip_joint_names.iter().copied().collect();
-            let extra: Vec<&str> = m
-                .pairs
-                .iter()
-                .map(|(c, _)| c.as_str())
-                .filter(|c| !clip.contains(c))
-                .collect();
+        Some((m, unnamed)) if unnamed.is_empty() => {
+            // Only a built-in can get here: it names every clip joint but expects more.
             format!(
-                "the built-in map '{}' ({}) also expects joints the clip lacks ({}), and built-in maps apply only to their exact joint set",
+                "the built-in map '{}' ({}) also expects joints the clip lacks ({}), and built-in maps apply only to clips with all their joints",
                 m.name,
                 m.source,
-                list(&extra)
+                list(&m.missing(clip_joint_names))
             )
         }
-        Some((m, missing)) if missing.len() < unknown.len() => format!(
+        Some((m, unnamed)) if unnamed.len() < unknown.len() => format!(
             "closest map '{}' ({}) has no entry for {}",
             m.name,
             m.source,
-            list(&missing)
+            list(&unnamed)
         ),
         _ => format!("joints {} are not rig joints", list(&unknown)),
     }
@@ -417,15 +618,52 @@ mod tests {
         b.joints.iter().map(|j| j.name.as_str()).collect()
     }
 
+    fn parents(b: &Bvh) -> Vec<Option<usize>> {
+        b.joints.iter().map(|j| j.parent).collect()
+    }
+
+    /// Resolves a real clip.
+    fn resolve_bvh(file: &str, b: &Bvh, users: &[JointMap]) -> Result<JointMapping, JointMapError> {
+        let (n, p) = (names(b), parents(b));
+        resolve(
+            file,
+            ClipJoints {
+                names: &n,
+                parents: &p,
+            },
+            &rig_names(),
+            users,
+        )
+    }
+
+    /// Resolves a flat list of root joints (no hierarchy).
+    fn resolve_flat(
+        clip: &str,
+        joints: &[&str],
+        users: &[JointMap],
+    ) -> Result<JointMapping, JointMapError> {
+        let p = vec![None; joints.len()];
+        resolve(
+            clip,
+            ClipJoints {
+                names: joints,
+                parents: &p,
+            },
+            &rig_names(),
+            users,
+        )
+    }
+
     /// Under the resolved map every clip joint's parent must land on the rig joint's parent: this
     /// is what catches a swapped LeftShoulder/LeftArm or Neck/Neck1.
     fn assert_hierarchy_preserved(b: &Bvh, r: &JointMapping) {
         let rig = rig_names();
-        assert_eq!(r.clip_to_rig.len(), b.joints.len());
+        let to = r.clip_to_rig();
+        assert_eq!(to.len(), b.joints.len());
         for (i, j) in b.joints.iter().enumerate() {
-            let target = r.clip_to_rig[i].expect("every joint mapped");
+            let target = to[i].expect("every joint mapped");
             let rig_parent = RIG[target].1;
-            let mapped_parent = j.parent.map_or("", |p| rig[r.clip_to_rig[p].unwrap()]);
+            let mapped_parent = j.parent.map_or("", |p| rig[to[p].unwrap()]);
             assert_eq!(mapped_parent, rig_parent, "{} -> {}", j.name, rig[target]);
         }
     }
@@ -434,9 +672,15 @@ mod tests {
     fn builtins_parse() {
         let b = builtin();
         let names: Vec<&str> = b.iter().map(|m| m.name.as_str()).collect();
-        assert_eq!(names, ["cmu_mb", "cmu_3dsmax"]);
+        assert_eq!(names, ["cmu_mb", "cmu_3dsmax", "cc_base", "mixamo"]);
         for m in &b {
-            assert_eq!(m.pairs.len(), 31, "{}", m.name);
+            // The CMU maps list every joint; the others only those that matter.
+            let mapped = match m.name.as_str() {
+                "cc_base" => 29,
+                "mixamo" => 28,
+                _ => 31,
+            };
+            assert_eq!(m.pairs.len(), mapped, "{}", m.name);
             let rig = rig_names();
             assert!(m.pairs.iter().all(|(_, r)| rig.contains(&r.as_str())));
         }
@@ -446,11 +690,11 @@ mod tests {
     fn clips_131_resolve_through_3dsmax_map() {
         for file in ["131_01.bvh", "131_02.bvh"] {
             let b = clip(file);
-            let r = resolve(file, &names(&b), &rig_names(), &[]).unwrap();
+            let r = resolve_bvh(file, &b, &[]).unwrap();
             assert_eq!(r.map_name, "cmu_3dsmax");
             assert_hierarchy_preserved(&b, &r);
             let rig = rig_names();
-            let to = |n: &str| rig[r.clip_to_rig[b.joint_index(n).unwrap()].unwrap()];
+            let to = |n: &str| rig[r.clip_to_rig()[b.joint_index(n).unwrap()].unwrap()];
             assert_eq!(to("LeftShoulder"), "LeftArm");
             assert_eq!(to("LeftCollar"), "LeftShoulder");
             assert_eq!(to("Neck"), "Neck1");
@@ -461,12 +705,12 @@ mod tests {
     #[test]
     fn clip_01_resolves_through_mb_map() {
         let b = clip("01_01.bvh");
-        let r = resolve("01_01.bvh", &names(&b), &rig_names(), &[]).unwrap();
+        let r = resolve_bvh("01_01.bvh", &b, &[]).unwrap();
         assert_eq!(r.map_name, "cmu_mb");
         assert_hierarchy_preserved(&b, &r);
         let rig = rig_names();
         let i = b.joint_index("RFingers").unwrap();
-        assert_eq!(rig[r.clip_to_rig[i].unwrap()], "RightHandFinger1");
+        assert_eq!(rig[r.clip_to_rig()[i].unwrap()], "RightHandFinger1");
     }
 
     #[test]
@@ -474,9 +718,7 @@ mod tests {
         let b = clip("01_01.bvh");
         let mut n = names(&b);
         n.push("Tail");
-        let e = resolve("tail.bvh", &n, &rig_names(), &[])
-            .unwrap_err()
-            .to_string();
+        let e = resolve_flat("tail.bvh", &n, &[]).unwrap_err().to_string();
         assert!(e.starts_with("tail.bvh: cannot match"), "{e}");
         assert!(
             e.contains("'cmu_mb'") && e.contains("no entry for 'Tail'"),
@@ -486,14 +728,14 @@ mod tests {
 
         // A user map that covers everything but points at a joint the rig lacks.
         let user = JointMap::parse("[map]\nHips = \"Pelvis\"\n", "my.map.toml").unwrap();
-        let e = resolve("c.bvh", &["Hips"], &rig_names(), &[user]).unwrap_err();
+        let e = resolve_flat("c.bvh", &["Hips"], &[user]).unwrap_err();
         assert_eq!(
             e.to_string(),
             "my.map.toml: maps clip joint 'Hips' to 'Pelvis', which is not a joint of the rig"
         );
 
         // Unknown names and no map at all.
-        let e = resolve("x.bvh", &["Hips", "A", "B"], &rig_names(), &[]).unwrap_err();
+        let e = resolve_flat("x.bvh", &["Hips", "A", "B"], &[]).unwrap_err();
         assert!(
             e.to_string().contains("joints 'A', 'B' are not rig joints"),
             "{e}"
@@ -503,22 +745,17 @@ mod tests {
     #[test]
     fn partial_builtin_is_not_used() {
         // Joints common to both namings but with different meanings: no built-in may guess.
-        let e = resolve(
-            "p.bvh",
-            &["Hips", "LeftShoulder", "LeftCollar"],
-            &rig_names(),
-            &[],
-        )
-        .unwrap_err()
-        .to_string();
+        let e = resolve_flat("p.bvh", &["Hips", "LeftShoulder", "LeftCollar"], &[])
+            .unwrap_err()
+            .to_string();
         assert!(
-            e.contains("'cmu_3dsmax'") && e.contains("exact joint set"),
+            e.contains("'cmu_3dsmax'") && e.contains("clips with all their joints"),
             "{e}"
         );
         // Exactly the rig's names: identity.
-        let r = resolve("i.bvh", &["Hips", "LeftShoulder"], &rig_names(), &[]).unwrap();
+        let r = resolve_flat("i.bvh", &["Hips", "LeftShoulder"], &[]).unwrap();
         assert_eq!(r.map_name, "identity");
-        assert_eq!(r.clip_to_rig, [Some(0), Some(17)]);
+        assert_eq!(r.clip_to_rig(), [Some(0), Some(17)]);
     }
 
     #[test]
@@ -529,15 +766,15 @@ mod tests {
         )
         .unwrap();
         let users = [user];
-        let r = resolve("a.bvh", &["Pelvis", "Thigh"], &rig_names(), &users).unwrap();
+        let r = resolve_flat("a.bvh", &["Pelvis", "Thigh"], &users).unwrap();
         assert_eq!(r.map_name, "mine");
-        assert_eq!(r.clip_to_rig, [Some(0), Some(2)]);
+        assert_eq!(r.clip_to_rig(), [Some(0), Some(2)]);
         let b = clip("131_01.bvh");
-        let r = resolve("131_01.bvh", &names(&b), &rig_names(), &users).unwrap();
+        let r = resolve_bvh("131_01.bvh", &b, &users).unwrap();
         assert_eq!(r.map_name, "cmu_3dsmax");
         // The user map may cover a subset of its keys.
-        let r = resolve("b.bvh", &["Pelvis"], &rig_names(), &users).unwrap();
-        assert_eq!(r.clip_to_rig, [Some(0)]);
+        let r = resolve_flat("b.bvh", &["Pelvis"], &users).unwrap();
+        assert_eq!(r.clip_to_rig(), [Some(0)]);
     }
 
     #[test]
@@ -578,12 +815,163 @@ mod tests {
         let m = JointMap::parse("[map]\nA = \"Hips\"\n", "dir/rokoko.map.toml").unwrap();
         assert_eq!(m.name, "rokoko");
         assert_eq!(m.target("A"), Some("Hips"));
-        assert!(m.covers(&["A"]) && !m.covers(&["A", "B"]));
+        let flat = |n: &'static [&'static str]| ClipJoints {
+            names: n,
+            parents: &[None, None][..n.len()],
+        };
+        assert!(m.covers(flat(&["A"])) && !m.covers(flat(&["A", "B"])));
     }
 
     #[test]
     fn duplicate_clip_joint_names_rejected() {
-        let e = resolve("d.bvh", &["Hips", "Hips"], &rig_names(), &[]).unwrap_err();
+        let e = resolve_flat("d.bvh", &["Hips", "Hips"], &[]).unwrap_err();
         assert!(matches!(e, JointMapError::DuplicateClipJoint { .. }), "{e}");
+    }
+
+    fn cc(name: &str) -> Bvh {
+        clip(&format!("cc_base/{name}"))
+    }
+
+    fn fate_of(b: &Bvh, r: &JointMapping, joint: &str) -> JointFate {
+        r.fates[b.joint_index(joint).unwrap_or_else(|| panic!("no {joint}"))]
+    }
+
+    #[test]
+    fn every_cc_base_take_is_recognised_and_folds_what_lies_between() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/mocap/cc_base");
+        let mut takes: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|e| e == "bvh"))
+            .collect();
+        takes.sort();
+        assert_eq!(takes.len(), 56);
+        let rig = rig_names();
+        for path in &takes {
+            let b = Bvh::read(path).unwrap();
+            let file = path.file_name().unwrap().to_string_lossy();
+            let r = resolve_bvh(&file, &b, &[]).unwrap_or_else(|e| panic!("{e}"));
+            assert_eq!(r.map_name, "cc_base", "{file}");
+            let (mapped, folded, dropped) = r.counts();
+            assert_eq!(mapped, 29, "{file}");
+            let hip = b.joint_index("CC_Base_Hip").unwrap();
+            assert_eq!(
+                fate_of(&b, &r, "CC_Base_Pelvis"),
+                JointFate::Folded {
+                    into: Some(hip),
+                    explicit: true
+                },
+                "{file}"
+            );
+            assert_eq!(
+                fate_of(&b, &r, "CC_Base_L_ThighTwist02"),
+                JointFate::Dropped { explicit: false },
+                "{file}: below a skipped twist bone"
+            );
+            assert_eq!(
+                fate_of(&b, &r, "CC_Base_L_CalfTwist01"),
+                JointFate::Dropped { explicit: true }
+            );
+            let extra_root = b.joint_index("RL_BoneRoot").is_some();
+            if extra_root {
+                assert_eq!(
+                    fate_of(&b, &r, "RL_BoneRoot"),
+                    JointFate::Folded {
+                        into: None,
+                        explicit: true
+                    }
+                );
+            }
+            assert_eq!(folded, 1 + extra_root as usize, "{file}");
+            assert_eq!(mapped + folded + dropped, b.joints.len());
+            let knee = fate_of(&b, &r, "CC_Base_L_Calf");
+            assert_eq!(knee, JointFate::Mapped { rig: 3 });
+            assert_eq!(rig[3], "LeftLeg");
+        }
+    }
+
+    #[test]
+    fn a_partial_user_map_folds_and_drops_the_rest() {
+        let b = cc("005_02.bvh");
+        // Hips, the legs and the spine: everything else folded or dropped by the rule.
+        let user = JointMap::parse(
+            "[map]\nCC_Base_Hip = \"Hips\"\nCC_Base_L_Thigh = \"LeftUpLeg\"\nCC_Base_L_Foot = \"LeftFoot\"\nCC_Base_R_Thigh = \"RightUpLeg\"\nCC_Base_R_Foot = \"RightFoot\"\nCC_Base_Head = \"Head\"\n",
+            "mine.toml",
+        )
+        .unwrap();
+        let r = resolve_bvh("005_02.bvh", &b, &[user]).unwrap();
+        assert_eq!(r.map_name, "mine");
+        let thigh = b.joint_index("CC_Base_L_Thigh").unwrap();
+        // Between thigh and foot: folded into the thigh.
+        assert_eq!(
+            fate_of(&b, &r, "CC_Base_L_Calf"),
+            JointFate::Folded {
+                into: Some(thigh),
+                explicit: false
+            }
+        );
+        assert_eq!(
+            fate_of(&b, &r, "CC_Base_NeckTwist02"),
+            JointFate::Folded {
+                into: Some(b.joint_index("CC_Base_Hip").unwrap()),
+                explicit: false
+            }
+        );
+        assert_eq!(
+            fate_of(&b, &r, "CC_Base_L_Hand"),
+            JointFate::Dropped { explicit: false }
+        );
+        assert_eq!(r.counts().0, 6);
+    }
+
+    #[test]
+    fn bad_maps_for_a_production_rig_are_one_line_errors() {
+        let b = cc("005_02.bvh");
+        let one_line = |e: JointMapError| {
+            let e = e.to_string();
+            assert!(!e.contains('\n'), "{e}");
+            e
+        };
+        // A joint the clip lacks.
+        let user = JointMap::parse(
+            "[map]\nCC_Base_Hip = \"Hips\"\nCC_Base_L_Thig = \"LeftUpLeg\"\n",
+            "typo.toml",
+        )
+        .unwrap();
+        let e = one_line(resolve_bvh("005_02.bvh", &b, &[user]).unwrap_err());
+        assert_eq!(e, "typo.toml: names 'CC_Base_L_Thig', which 005_02.bvh lacks; fix the names or leave them out (joints left out are folded or dropped)");
+        // Skipping a joint with a mapped joint below it.
+        let user = JointMap::parse(
+            "skip = [\"CC_Base_Pelvis\"]\n[map]\nCC_Base_Hip = \"Hips\"\nCC_Base_L_Thigh = \"LeftUpLeg\"\n",
+            "skip.toml",
+        )
+        .unwrap();
+        let e = one_line(resolve_bvh("005_02.bvh", &b, &[user]).unwrap_err());
+        assert!(
+            e.contains("skips 'CC_Base_Pelvis'") && e.contains("'CC_Base_L_Thigh'"),
+            "{e}"
+        );
+        // Folding a leaf.
+        let user = JointMap::parse(
+            "fold = [\"CC_Base_L_Eye\"]\n[map]\nCC_Base_Hip = \"Hips\"\n",
+            "fold.toml",
+        )
+        .unwrap();
+        let e = one_line(resolve_bvh("005_02.bvh", &b, &[user]).unwrap_err());
+        assert!(
+            e.contains("folds 'CC_Base_L_Eye'") && e.contains("skip"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn globs() {
+        assert!(glob("CC_Base_*Twist0?", "CC_Base_L_ThighTwist01"));
+        assert!(!glob("CC_Base_*Twist0?", "CC_Base_L_ThighTwist1"));
+        assert!(glob("*", ""));
+        assert!(glob("a*b*c", "aXXbYc"));
+        assert!(!glob("a*b*c", "aXXbYd"));
+        assert!(glob("mixamorig:*Toe_End", "mixamorig:LeftToe_End"));
+        assert!(!glob("abc", "abcd"));
     }
 }

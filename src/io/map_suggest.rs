@@ -45,9 +45,7 @@ fn side_of(name: &str) -> Option<Side> {
     }
     // Separated letters (`CC_Base_L_Thigh`, `thigh_l`, `Hand.R`) or a capital before a capital
     // (`LHipJoint`, `RThumb`).
-    let tokens: Vec<&str> = base
-        .split(|c: char| c == '_' || c == '.' || c == ' ' || c == '-')
-        .collect();
+    let tokens: Vec<&str> = base.split(['_', '.', ' ', '-']).collect();
     for t in &tokens {
         match *t {
             "L" | "l" => return Some(Side::Left),

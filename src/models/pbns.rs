@@ -259,6 +259,22 @@ impl Pbns {
             .collect()
     }
 
+    /// The network's own forward pass ([`Pbns::forward`]: dense skinning in torch, as training
+    /// computes the loss) over `poses`, in chunks, no gradients, as points on the CPU, one list
+    /// per pose. The reference the exported files are checked against: on the CPU it shares no
+    /// skinning code with [`Pbns::predict_points`] (which `eval` writes caches with) nor with a
+    /// bake's blend shapes and skin.
+    pub fn forward_points(&self, poses: &PoseBatch) -> Vec<Vec<[f32; 3]>> {
+        let n = self.shape.vertices;
+        let x = super::predict_chunks(poses.len(), |s, k| {
+            self.forward(&poses.slice(s, k)).vertices
+        });
+        super::pose_features::tensor_points(&x)
+            .chunks_exact(n)
+            .map(<[_]>::to_vec)
+            .collect()
+    }
+
     pub fn forward(&self, batch: &PoseBatch) -> Output {
         let displacement = self.displacement(&batch.features);
         let rest = self.template.unsqueeze(0) + &displacement;

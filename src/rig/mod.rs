@@ -2,6 +2,7 @@
 //! skinning, SkelAnimation clips, and retargeting of motion capture onto the body.
 
 pub mod animation;
+pub mod capture;
 pub mod retarget;
 pub mod skeleton;
 pub mod skin;

@@ -40,7 +40,7 @@ impl Sequence {
     pub fn load(
         motion: &Path,
         sim: &Path,
-        maps: &[crate::io::joint_map::JointMap],
+        maps: &crate::motion::ClipReader,
         skeleton: &crate::rig::Skeleton,
         fps: Option<f32>,
         vertices: usize,

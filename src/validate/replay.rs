@@ -1,9 +1,9 @@
 //! Does the file play what the model plays? The file's frames (a glTF evaluated by
-//! [`super::scene`], or a point cache read back) against the model's own evaluation of the same
-//! clip (`eval::model_frames`, the reference `eval` and `bake` use), in mm, every frame.
+//! [`super::scene`], or a point cache read back) against the network's own forward pass on the
+//! same clip ([`crate::models::Pbns::forward_points`]; not `eval::model_frames`, which wrote
+//! `eval`'s caches and so would agree with any fault of its own), in mm, every frame.
 
 use crate::bake::skinned_mesh_asset;
-use crate::eval::model_frames;
 use crate::models::file::ModelFile;
 use crate::preview::{render_panel, save_png, ErrorBands, Framing, Panel, View};
 use crate::rig::SkelAnimation;
@@ -25,13 +25,14 @@ pub struct Reference {
 }
 
 impl Reference {
-    /// The PBNS network evaluated on every frame of `clip` (already on the model's skeleton).
+    /// The PBNS network's forward pass on every frame of `clip` (already on the model's
+    /// skeleton).
     pub fn of(model: &ModelFile, clip: &SkelAnimation, device: Device) -> Result<Reference> {
         let network = model.pbns()?;
         let poses: Vec<_> = (0..clip.frame_count())
             .map(|f| clip.local_pose(f))
             .collect();
-        let frames = model_frames(network, model.skeleton(), &poses, device);
+        let frames = network.forward_points(&network.batch(model.skeleton(), &poses, device));
         let baked = skinned_mesh_asset("garment", &model.garment, None, &network.skin(), [0.0; 3]);
         Ok(Reference {
             clip: clip.name.clone(),

@@ -58,7 +58,7 @@ fn write(path: &Path, frames: &[Vec<[f32; 3]>]) {
     exporters::pc2::write(path, &cache).unwrap();
 }
 
-fn compare_args<'a>(sims: &'a [String], extra: &[&'a str]) -> Vec<&'a str> {
+fn compare_args<'a>(sims: &'a [String], horizon: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
     let mut args = vec![
         "compare",
         "--body",
@@ -72,7 +72,7 @@ fn compare_args<'a>(sims: &'a [String], extra: &[&'a str]) -> Vec<&'a str> {
         "--frames",
         FRAMES,
         "--horizon",
-        "4",
+        horizon,
         "--restart-every",
         "3",
     ];
@@ -140,9 +140,10 @@ fn perturbed_runs_part_and_compare_tells_a_blur_from_a_run() {
         hp,
         "--plot-hem",
         mp,
+        "--with-mean",
         "--json",
     ]);
-    let r = garmentbake_json(&compare_args(&sims, &extra));
+    let r = garmentbake_json(&compare_args(&sims, "4", &extra));
 
     let sigma = f(&r["spread"]["sigma_mm"]["clip"]);
     assert!(sigma > 0.1, "{}", r["spread"]);
@@ -166,6 +167,9 @@ fn perturbed_runs_part_and_compare_tells_a_blur_from_a_run() {
     );
     assert_eq!(f(&b["score"]["own_mm"]["clip"]), 0.0);
     assert!(f(&b["score"]["versus_mean_rms_mm"]["clip"]) < 1e-3);
+    // --with-mean scores the same garment, computed from the runs by compare itself.
+    let own_mean = cache("runs-mean");
+    assert!((f(&own_mean["score"]["rms_mm"]["clip"]) - got).abs() < 1e-3);
     // A run compared with itself; another run has an error of its own.
     assert_eq!(f(&run0["score"]["each_rms_mm"][0]["clip"]), 0.0);
     assert!(
@@ -206,11 +210,10 @@ fn perturbed_runs_part_and_compare_tells_a_blur_from_a_run() {
     // The plots, read back by the `image` crate: sizes, and each cache's line drawn.
     let h = image::open(&horizon_png).unwrap().to_rgb8();
     assert_eq!(h.dimensions(), (900, 520));
-    let blue = garmentbake::preview::plot::LINE_COLORS[0];
-    assert!(
-        h.pixels().filter(|p| p.0 == blue).count() > 50,
-        "the first cache's e(k) line"
-    );
+    // The last cache's line (runs-mean, drawn over the blur's, which is the same curve).
+    let last = garmentbake::preview::plot::LINE_COLORS[3];
+    let drawn = h.pixels().filter(|p| p.0 == last).count();
+    assert!(drawn > 200, "{drawn} pixels of the last e(k) line");
     let m = image::open(&hem_png).unwrap().to_rgb8();
     assert_eq!(m.dimensions(), (1100, 780));
 
@@ -218,17 +221,116 @@ fn perturbed_runs_part_and_compare_tells_a_blur_from_a_run() {
     let png = dir.join("never.png");
     let p = png.to_str().unwrap();
     let one = [sims[0].clone()];
-    let o = garmentbake_in_root(&compare_args(&one, &["--plot-horizon", p]));
+    let o = garmentbake_in_root(&compare_args(&one, "4", &["--plot-horizon", p]));
     let e = one_error_line(&o, &png);
     assert!(e.contains("--sim"), "{e}");
     let o = garmentbake_in_root(&compare_args(
         &sims,
+        "4",
         &["--cache", &caches[0], "--baseline", "pbns", "--plot-hem", p],
     ));
     assert!(one_error_line(&o, &png).contains("--baseline pbns"));
     let short = dir.join("short.pc2");
     write(&short, &mean[..5]);
     let bad = format!("short={}", short.display());
-    let o = garmentbake_in_root(&compare_args(&sims, &["--cache", &bad, "--plot-hem", p]));
+    let o = garmentbake_in_root(&compare_args(
+        &sims,
+        "4",
+        &["--cache", &bad, "--plot-hem", p],
+    ));
     assert!(one_error_line(&o, &png).contains("short.pc2"));
+}
+
+#[test]
+fn a_dynamic_model_is_restarted_from_each_runs_state() {
+    let dir = out_dir("compare_restart");
+    let (run0, _) = run(&dir, 0);
+    let (run1, _) = run(&dir, 1);
+    let (r0, r1) = (run0.to_str().unwrap(), run1.to_str().unwrap());
+    let (space, model, roll) = (
+        dir.join("space.safetensors"),
+        dir.join("hold.safetensors"),
+        dir.join("hold.pc2"),
+    );
+    let clip = [
+        "--body",
+        "samples/body.glb",
+        "--garment",
+        "samples/garments/skirt.obj",
+        "--motion",
+        "samples/motions/131_01.bvh",
+        "--sim",
+        r0,
+        "--fps",
+        "30",
+        "--epochs",
+        "0",
+        "--threads",
+        "1",
+        "--json",
+    ];
+    let mut args = vec!["train-dynamic", "--out", space.to_str().unwrap()];
+    args.extend_from_slice(&clip);
+    garmentbake_json(&args);
+    // "Hold the latent" (a huge ridge pins the integrator to its previous latent): restarted,
+    // it keeps each run's shape at the restart; played from frame 0, it keeps frame 0's.
+    let mut args = vec![
+        "train-dynamic",
+        "--stage",
+        "dynamic",
+        "--from",
+        space.to_str().unwrap(),
+        "--ridge",
+        "1e9",
+        "--no-pose-settle",
+        "--rollout-rounds",
+        "0",
+        "--out",
+        model.to_str().unwrap(),
+    ];
+    args.extend_from_slice(&clip);
+    garmentbake_json(&args);
+    let m = model.to_str().unwrap();
+    garmentbake_json(&[
+        "rollout",
+        "--model",
+        m,
+        "--motion",
+        "samples/motions/131_01.bvh",
+        "--init",
+        r0,
+        "--frames",
+        FRAMES,
+        "--no-collision-fix",
+        "--threads",
+        "1",
+        "--out",
+        roll.to_str().unwrap(),
+        "--json",
+    ]);
+    let sims = [r0.to_string(), r1.to_string()];
+    let cache = format!("hold={}", roll.display());
+    let restart = format!("hold={m}");
+    let mut args = compare_args(
+        &sims,
+        "1",
+        &["--cache", &cache, "--json", "--no-collision-fix"],
+    );
+    let read = garmentbake_json(&args);
+    args.extend_from_slice(&["--model", &restart]);
+    let restarted = garmentbake_json(&args);
+    let e1 = |r: &serde_json::Value| f(&r["caches"][0]["horizon_mm"][0]);
+    assert_eq!(restarted["caches"][0]["restarted"], true);
+    assert_eq!(read["caches"][0]["restarted"], false);
+    assert_eq!(restarted["starts"], serde_json::json!([0, 3, 6, 9]));
+    // One step after a restart on each run's own state the held garment is one frame of cloth
+    // motion off; read from the roll-out, it is frame 0's shape, ever further from the runs.
+    // Measured: 12.4 mm restarted, 39.7 mm from the roll-out.
+    let (a, b) = (e1(&restarted), e1(&read));
+    assert!(
+        a < 0.6 * b,
+        "restarted e(1) {a} mm, from the roll-out {b} mm"
+    );
+    // Everything but e(k) is the same cache's.
+    assert_eq!(restarted["caches"][0]["score"], read["caches"][0]["score"]);
 }

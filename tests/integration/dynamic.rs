@@ -37,7 +37,7 @@ fn short_sim(dir: &Path) -> PathBuf {
 }
 
 /// A test folder, its six simulated frames and the untrained (linear, 64-d) space of them.
-fn untrained_space(name: &str) -> (PathBuf, PathBuf, PathBuf) {
+pub fn untrained_space(name: &str) -> (PathBuf, PathBuf, PathBuf) {
     let dir = out_dir(name);
     let sim = short_sim(&dir);
     let space = dir.join("space.safetensors");
@@ -238,7 +238,7 @@ fn motion_stage<'a>(space: &'a str, sim: &'a str, out: &'a str) -> Vec<&'a str> 
 }
 
 /// The space (linear path only) and the motion stage on the six simulated frames.
-fn motion_model(
+pub fn motion_model(
     dir: &Path,
     sim: &Path,
     name: &str,
@@ -557,10 +557,15 @@ fn gltf_replays_the_roll_out(dir: &Path, model: &Path, sim: &Path, roll: &Path) 
         model,
         sim,
         &glb,
-        &["--no-collision-fix", "--tolerance-mm", "0.5"],
+        &["--no-collision-fix", "--tolerance-mm", "0.5", "--validate"],
     );
     let baked = &r["baked"];
     assert!(baked["max_error_m"].as_f64().unwrap() <= 0.5e-3, "{baked}");
+    // --validate replays the glTF (our evaluation of the spec, seam-split vertices mapped back)
+    // against the frames just rolled out, every frame (it checked the structure only before).
+    let checked = &r["validation"];
+    assert_eq!(checked["passed"], true, "{checked}");
+    assert_eq!(checked["replay"]["frames"], 6, "{checked}");
     let (ok, report) = khronos_validate(&glb);
     assert!(ok, "{report}");
     let file = garmentbake::models::file::load(model, tch::Device::Cpu).unwrap();
@@ -602,6 +607,12 @@ fn gltf_replays_the_roll_out(dir: &Path, model: &Path, sim: &Path, roll: &Path) 
         (max_mm - err * 1e3).abs() < 1e-3,
         "ours {max_mm} mm, three.js {} mm",
         err * 1e3
+    );
+    // rollout --validate measured the same replay as validate --reference on its cache.
+    let own = checked["replay"]["max_mm"].as_f64().unwrap();
+    assert!(
+        (own - max_mm).abs() < 1e-6,
+        "rollout {own} mm, validate {max_mm} mm"
     );
     let quantized = gltf_json_of(&glb);
     assert_eq!(quantized["extensionsRequired"][0], "KHR_mesh_quantization");
@@ -1033,4 +1044,16 @@ fn a_latent_walk_ends_on_its_frames_and_previews_from_its_start() {
         &never,
     );
     assert!(err.contains("a < b"), "{err}");
+    // B at or past the six simulated frames: one line (it was an index panic).
+    for between in ["1,6", "0,600"] {
+        let bad = args(between, &never);
+        let err = one_error_line(
+            &garmentbake_in_root(&bad.iter().map(String::as_str).collect::<Vec<_>>()),
+            &never,
+        );
+        assert!(
+            err.contains(&format!("--between {between}")) && err.contains("< 6"),
+            "{err}"
+        );
+    }
 }

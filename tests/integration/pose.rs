@@ -43,9 +43,14 @@ fn threejs_skins_the_posed_body_like_our_lbs() {
     let dir = out_dir("pose_threejs");
     let file = pose("131_01", &dir);
     let body = read_body(&sample("body.glb")).unwrap();
-    let clip = load_clip(&sample("motions/131_01.bvh"), &[], &body.skeleton, None)
-        .unwrap()
-        .animation;
+    let clip = load_clip(
+        &sample("motions/131_01.bvh"),
+        &Default::default(),
+        &body.skeleton,
+        None,
+    )
+    .unwrap()
+    .animation;
     let n = clip.frame_count();
     let frames = [0, n / 4, n / 2, 3 * n / 4, n - 1];
     let times: Vec<f32> = frames.iter().map(|&f| f as f32 / clip.fps).collect();
@@ -69,9 +74,14 @@ fn blender_imports_and_plays_the_posed_body() {
     let dir = out_dir("pose_blender");
     let file = pose("131_02", &dir);
     let body = read_body(&sample("body.glb")).unwrap();
-    let clip = load_clip(&sample("motions/131_02.bvh"), &[], &body.skeleton, None)
-        .unwrap()
-        .animation;
+    let clip = load_clip(
+        &sample("motions/131_02.bvh"),
+        &Default::default(),
+        &body.skeleton,
+        None,
+    )
+    .unwrap()
+    .animation;
     let frames = [10, 600, 1200];
     let result = blender_positions(&file, &frames, clip.fps);
     let mesh = &result["meshes"][0];

@@ -38,7 +38,7 @@ fn lowest_vertex(
 fn retargeted_walk_keeps_stance_feet_on_the_floor_and_the_body_upright() {
     let body = read_body(&sample("body.glb")).unwrap();
     let sk = &body.skeleton;
-    let anim = load_clip(&sample("motions/131_01.bvh"), &[], sk, None)
+    let anim = load_clip(&sample("motions/131_01.bvh"), &Default::default(), sk, None)
         .unwrap()
         .animation;
     let j = |n: &str| sk.joint_index(n).unwrap();
@@ -99,8 +99,20 @@ fn retargeted_walk_keeps_stance_feet_on_the_floor_and_the_body_upright() {
 #[test]
 fn both_cmu_namings_are_recognised_without_a_map() {
     let body = read_body(&sample("body.glb")).unwrap();
-    let mb = load_clip(&sample("motions/01_01.bvh"), &[], &body.skeleton, None).unwrap();
-    let max = load_clip(&sample("motions/131_02.bvh"), &[], &body.skeleton, None).unwrap();
+    let mb = load_clip(
+        &sample("motions/01_01.bvh"),
+        &Default::default(),
+        &body.skeleton,
+        None,
+    )
+    .unwrap();
+    let max = load_clip(
+        &sample("motions/131_02.bvh"),
+        &Default::default(),
+        &body.skeleton,
+        None,
+    )
+    .unwrap();
     assert_eq!(mb.map_name, "cmu_mb");
     assert_eq!(max.map_name, "cmu_3dsmax");
     assert_eq!(
@@ -137,7 +149,11 @@ fn a_mirrored_clip_is_the_mirror_image_and_a_faster_one_the_same_poses_sooner() 
     );
     let body = read_body(&sample("body.glb")).unwrap();
     let sk = &body.skeleton;
-    let load = |p: &std::path::Path| load_clip(p, &[], sk, Some(30.0)).unwrap().animation;
+    let load = |p: &std::path::Path| {
+        load_clip(p, &Default::default(), sk, Some(30.0))
+            .unwrap()
+            .animation
+    };
     let (a, m, s) = (
         load(&sample("motions/131_01.bvh")),
         load(&mirrored),
@@ -204,11 +220,19 @@ fn a_reversed_clip_plays_backwards_and_a_swayed_one_spreads_the_legs_smoothly() 
     );
     let body = read_body(&sample("body.glb")).unwrap();
     let sk = &body.skeleton;
-    let load = |p: &std::path::Path| load_clip(p, &[], sk, Some(30.0)).unwrap().animation;
+    let load = |p: &std::path::Path| {
+        load_clip(p, &Default::default(), sk, Some(30.0))
+            .unwrap()
+            .animation
+    };
     let (a, w) = (load(&sample("motions/131_01.bvh")), load(&swayed));
     let j = |n: &str| sk.joint_index(n).unwrap();
     // At the capture's own rate (120 Hz), so frame for frame.
-    let native = |p: &std::path::Path| load_clip(p, &[], sk, None).unwrap().animation;
+    let native = |p: &std::path::Path| {
+        load_clip(p, &Default::default(), sk, None)
+            .unwrap()
+            .animation
+    };
     let (a120, r) = (native(&sample("motions/131_01.bvh")), native(&reversed));
     let n = a120.frame_count();
     assert_eq!(r.frame_count(), n);

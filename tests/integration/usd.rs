@@ -21,7 +21,7 @@ const REPLAY_TOLERANCE_MM: f64 = 0.01;
 fn clip(body: &Body, name: &str, fps: f32) -> SkelAnimation {
     load_clip(
         &sample(&format!("motions/{name}.bvh")),
-        &[],
+        &Default::default(),
         &body.skeleton,
         Some(fps),
     )

@@ -1,0 +1,140 @@
+//! Number flags: NaN, infinities and negative numbers are refused by every float flag of every
+//! command, and 0 by every rate, as one `error:` line naming the flag (exit code 2) before any
+//! work. The flags are found through clap, so a float flag added later is covered too.
+
+use crate::common::*;
+use std::any::TypeId;
+
+/// Every float flag of every (sub)command: (the command words, the long flag name).
+fn float_flags() -> Vec<(Vec<String>, String)> {
+    fn walk(cmd: &clap::Command, words: &[String], out: &mut Vec<(Vec<String>, String)>) {
+        for arg in cmd.get_arguments() {
+            let id = arg.get_value_parser().type_id();
+            let float = id == TypeId::of::<f32>() || id == TypeId::of::<f64>();
+            if let (true, Some(long)) = (float, arg.get_long()) {
+                out.push((words.to_vec(), long.to_string()));
+            }
+        }
+        for sub in cmd.get_subcommands() {
+            let mut w = words.to_vec();
+            w.push(sub.get_name().to_string());
+            walk(sub, &w, out);
+        }
+    }
+    let mut out = Vec::new();
+    walk(&garmentbake::cli::command(), &[], &mut out);
+    out
+}
+
+/// `WORDS --FLAG=VALUE` as the command line parses it: clap's refusal, rendered.
+fn parse_refusal(words: &[String], flag: &str, value: &str) -> String {
+    let args = std::iter::once("garmentbake".to_string())
+        .chain(words.iter().cloned())
+        .chain([format!("--{flag}={value}")]);
+    match garmentbake::cli::command().try_get_matches_from(args) {
+        Ok(_) => panic!("{words:?} --{flag}={value} was accepted"),
+        Err(e) => e.render().to_string(),
+    }
+}
+
+/// `garmentbake ARGS`: the one error line (exit code 2, no panic).
+fn refused(args: &[&str]) -> String {
+    let out = garmentbake(args);
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.code(), Some(2), "{args:?} was accepted: {err}");
+    let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
+    assert_eq!(lines.len(), 1, "{args:?}: one line expected: {err}");
+    assert!(lines[0].starts_with("error: "), "{args:?}: {err}");
+    lines[0].to_string()
+}
+
+#[test]
+fn every_float_flag_refuses_nan_infinity_and_negative_numbers() {
+    let flags = float_flags();
+    // 27 when written (tolerances, seconds, weights, rates, ridges, scales); a floor so that a
+    // broken walk cannot pass by finding none.
+    assert!(flags.len() >= 20, "found only {flags:?}");
+    let mut rates = 0;
+    for (words, flag) in &flags {
+        for bad in ["nan", "inf", "-inf", "-1", "1e999"] {
+            // The value is refused while parsing, before any missing flag is noticed.
+            let err = parse_refusal(words, flag, bad);
+            assert!(
+                err.starts_with(&format!("error: --{flag} {bad}: give a finite number")),
+                "{words:?} --{flag}={bad}: {err}"
+            );
+        }
+        if flag == "fps" {
+            rates += 1;
+            let err = parse_refusal(words, flag, "0");
+            assert!(
+                err.contains("--fps 0: give a finite number above 0"),
+                "{err}"
+            );
+        }
+    }
+    // pose, preview, train, eval, bake, simulate, train-dynamic, validate, view, bench train, ...
+    assert!(rates >= 9, "{rates} commands with --fps");
+    // What a person sees: one line, exit code 2, from the binary (one flag per command kind).
+    for args in [
+        &["simulate", "--settle=nan"][..],
+        &["train", "--lr=0"],
+        &["rollout", "--collision-margin-mm=-1"],
+        &["validate", "x.glb", "--tolerance-mm=inf"],
+    ] {
+        let err = refused(args);
+        let (flag, value) = args.last().unwrap().split_once('=').unwrap();
+        assert!(err.contains(&format!("{flag} {value}: give")), "{err}");
+    }
+}
+
+/// The case: `--fps nan` was taken, and 1,247 keyframes written at the source rate.
+#[test]
+fn pose_with_fps_nan_writes_nothing() {
+    let dir = out_dir("flags_fps_nan");
+    let out = dir.join("x.glb");
+    for fps in ["nan", "0", "-30", "inf"] {
+        let o = garmentbake(&[
+            "pose",
+            "--body",
+            sample("body.glb").to_str().unwrap(),
+            "--motion",
+            sample("motions/131_02.bvh").to_str().unwrap(),
+            &format!("--fps={fps}"),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        let err = one_error_line(&o, &out);
+        assert!(err.contains(&format!("--fps {fps}")), "{err}");
+    }
+    // A rate that is one still works.
+    garmentbake_ok(&[
+        "pose",
+        "--body",
+        sample("body.glb").to_str().unwrap(),
+        "--motion",
+        sample("motions/131_02.bvh").to_str().unwrap(),
+        "--fps",
+        "30",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(out.is_file());
+}
+
+/// clap's own refusals (an unknown flag, a missing one) are one line too.
+#[test]
+fn usage_errors_are_one_line() {
+    for args in [
+        &["pose", "--body", "x.glb"][..],
+        &["pose", "--fsp", "30"][..],
+    ] {
+        let o = garmentbake(args);
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        assert!(err.starts_with("error: "), "{err}");
+    }
+    // Help still prints in full, and succeeds.
+    assert!(garmentbake_ok(&["pose", "--help"]).contains("Usage:"));
+}
