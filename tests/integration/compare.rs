@@ -207,7 +207,7 @@ fn perturbed_runs_part_and_compare_tells_a_blur_from_a_run() {
     );
     assert!(f(&run0["plausibility"]["jitter_mm"]) > 0.0);
 
-    // The plots, read back by the `image` crate: sizes, and each cache's line drawn.
+    // The plots, read back by the `image` crate: their sizes, and the last line drawn.
     let h = image::open(&horizon_png).unwrap().to_rgb8();
     assert_eq!(h.dimensions(), (900, 520));
     // The last cache's line (runs-mean, drawn over the blur's, which is the same curve).
