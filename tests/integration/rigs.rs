@@ -496,3 +496,67 @@ fn lowest_vertex(
         })
         .collect()
 }
+
+/// Bad maps for a production rig: a joint the clip lacks, no hips, a whole leg folded away — one
+/// `error:` line each, exit code 2, nothing written.
+#[test]
+fn bad_production_maps_are_one_error_line_and_write_nothing() {
+    let dir = out_dir("rigs_bad_maps");
+    let clip = cc_take("005_02.bvh");
+    let legs = "CC_Base_L_Thigh = \"LeftUpLeg\"\nCC_Base_L_Calf = \"LeftLeg\"\nCC_Base_L_Foot = \"LeftFoot\"\n";
+    let right = "CC_Base_R_Thigh = \"RightUpLeg\"\nCC_Base_R_Calf = \"RightLeg\"\nCC_Base_R_Foot = \"RightFoot\"\n";
+    let cases = [
+        (
+            "missing.toml",
+            format!("[map]\nCC_Base_Hip = \"Hips\"\nCC_Base_L_Thigg = \"LeftUpLeg\"\n{right}"),
+            "names 'CC_Base_L_Thigg', which",
+        ),
+        (
+            "no_hips.toml",
+            format!("[map]\n{legs}{right}"),
+            "no clip joint drives the rig's root 'Hips'",
+        ),
+        (
+            "one_leg.toml",
+            format!("[map]\nCC_Base_Hip = \"Hips\"\n{right}"),
+            "folds the rig's left leg away",
+        ),
+    ];
+    for (name, text, expect) in cases {
+        let map = dir.join(name);
+        std::fs::write(&map, text).unwrap();
+        let out = dir.join(format!("{name}.glb"));
+        let run = garmentbake(&[
+            "pose",
+            "--body",
+            sample("body.glb").to_str().unwrap(),
+            "--motion",
+            clip.to_str().unwrap(),
+            "--map",
+            map.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert_eq!(run.status.code(), Some(2), "{name}");
+        let line = one_error_line(&run, &out);
+        assert!(line.contains(expect), "{name}: {line}");
+    }
+    // A clip with no recognisable legs for `map suggest`.
+    let arms = dir.join("arms.bvh");
+    std::fs::write(
+        &arms,
+        "HIERARCHY\nROOT Root\n{\n OFFSET 0 0 0\n CHANNELS 3 Zrotation Yrotation Xrotation\n JOINT LeftHand\n {\n  OFFSET 1 0 0\n  CHANNELS 3 Zrotation Yrotation Xrotation\n  End Site\n  {\n   OFFSET 1 0 0\n  }\n }\n}\nMOTION\nFrames: 2\nFrame Time: 0.0333333\n0 0 0 0 0 0\n0 0 0 0 0 0\n",
+    )
+    .unwrap();
+    let out = dir.join("arms.toml");
+    let run = garmentbake(&[
+        "map",
+        "suggest",
+        arms.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(run.status.code(), Some(2));
+    let line = one_error_line(&run, &out);
+    assert!(line.contains("no recognisable legs"), "{line}");
+}
