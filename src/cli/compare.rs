@@ -60,7 +60,7 @@ pub struct Args {
     #[arg(long, default_value_t = 50)]
     pub restart_every: usize,
     /// The hem's lag behind the pelvis is looked for within ± this many seconds.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = super::args::positive::<f32>())]
     pub max_lag: f32,
     /// Also score the simulations' vertex-wise mean garment (as `runs-mean`): the blurred
     /// average that wins whole-clip distance without being a garment, for scale.
