@@ -465,7 +465,8 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
     );
     let late = restarts["each"][1][1]["one_step_mm"].as_f64().unwrap();
     eprintln!("restart at frame 2, one step: {late:.4} mm (teacher-forced mean {f:.4} mm)");
-    assert!(late < 0.05, "{restarts}");
+    // Measured 0.0003 mm.
+    assert!(late < 0.003, "{restarts}");
     let windows = plain["windows"].as_array().unwrap();
     assert_eq!((windows.len(), &windows[0]["last_frame"]), (1, &5.into()));
     // --view: the roll-out and the simulation (the reference, inlined once) in one page.
@@ -483,7 +484,12 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
     assert_eq!(frames.len(), 6);
     assert!(frames[0] == first[0], "frame 0 is the --init garment");
     let v = &plain["reference"];
-    assert!(v["one_step_mm"].as_f64().unwrap() < 2.0 * f + 1.0, "{v}");
+    eprintln!(
+        "roll-out vs the simulation, one step: {} mm (teacher-forced mean {f:.5} mm)",
+        v["one_step_mm"]
+    );
+    // Measured 0.00068 mm (the teacher-forced fit's mean f: 0.0004 mm); was < 2f + 1 mm.
+    assert!(v["one_step_mm"].as_f64().unwrap() < 0.007, "{v}");
     two_references_measure_their_own_spread(&model, &sim, &dir);
     settling_hands_the_garment_to_the_pose(&dir, &sim, f);
     gltf_replays_the_roll_out(&dir, &model, &sim, &out);
@@ -853,7 +859,8 @@ fn settling_hands_the_garment_to_the_pose(dir: &Path, sim: &Path, teacher_mm: f6
     );
     let one = report["train"]["mean_mm"].as_f64().unwrap();
     eprintln!("one step: settled {one:.3} mm, teacher-forced {teacher_mm:.3} mm");
-    assert!(one < 3.0 * teacher_mm + 1.0, "{report}");
+    // Measured 0.38 mm (teacher-forced: 0.0004 mm); was < 3 × teacher-forced + 1 mm.
+    assert!(one < 0.8, "{report}");
 }
 
 /// Two --reference caches, the simulation and plain LBS (written by a first roll-out): LBS is

@@ -391,12 +391,15 @@ fn eval_writes_a_pc2_that_blender_plays() {
     let (version, points, samples, data) = read_pc2(&pc2);
     assert_eq!((version, points, samples), (1, 2808, frames));
     assert_eq!(report["frames"], frames);
+    // Measured on this 1-epoch model (seed 2), 131_02 at 10 fps: edge error 2.96 mm; mean edge
+    // strain 15.2 % (model), 16.2 % (plain LBS), 12.4 % (the body under the garment). Each is
+    // asserted within a factor of 2 of that (it was > 0 and 0 < strain < 100 %).
     let edge_mm = report["metrics"]["model"]["edge_mm"].as_f64().unwrap();
     eprintln!(
         "eval: edge error {edge_mm:.4} mm, strain % {}",
         report["strain_pct"]
     );
-    assert!(edge_mm > 0.0);
+    assert!((1.5..6.0).contains(&edge_mm), "edge error {edge_mm} mm");
     // The body-overlap split is part of the collided share, and the clip's overlap is reported.
     for series in ["model", "lbs"] {
         let m = &report["metrics"][series];
@@ -407,9 +410,12 @@ fn eval_writes_a_pc2_that_blender_plays() {
         assert!((0.0..=all).contains(&at), "{series}: {at} of {all}");
     }
     let strain = &report["strain_pct"];
-    for k in ["model", "lbs", "body_under_garment"] {
+    for (k, measured) in [("model", 15.2), ("lbs", 16.2), ("body_under_garment", 12.4)] {
         let v = strain[k].as_f64().unwrap();
-        assert!(v > 0.0 && v < 100.0, "{k} strain {v} %");
+        assert!(
+            v > measured / 2.0 && v < 2.0 * measured,
+            "{k} strain {v} %, measured {measured} %"
+        );
     }
     let overlap = &report["body_overlap_vertices"];
     assert!(overlap["most"].as_u64().unwrap() >= overlap["median"].as_u64().unwrap());
@@ -453,7 +459,8 @@ fn eval_writes_a_pc2_that_blender_plays() {
             "Blender reads the PC2, frame {s}: max {:.6} mm",
             worst * 1e3
         );
-        assert!(worst <= 1e-5, "frame {s}: Blender differs by {worst} m");
+        // Measured 0.000056 mm at both frames (f32 through Blender's Mesh Cache).
+        assert!(worst <= 5e-7, "frame {s}: Blender differs by {worst} m");
     }
 }
 

@@ -881,7 +881,8 @@ fn replay_against_the_model() {
     assert_eq!(code, Some(0), "{good}");
     let r = &good["replay"];
     assert_eq!(r["frames"], 312);
-    assert!(r["max_mm"].as_f64().unwrap() < 0.05, "{r}");
+    // Measured 0.0020 mm (f32 noise of the full-basis bake against the network's forward pass).
+    assert!(r["max_mm"].as_f64().unwrap() < 0.02, "{r}");
 
     // Offsets ×1.5: structurally valid (Khronos and ours agree), but the replay is off by half
     // the morph displacement and fails the default 1 mm tolerance, with the error in mm. (The
@@ -954,7 +955,9 @@ fn point_caches() {
             out.to_str().unwrap(),
         ]);
     }
-    // eval's caches pass, and replay the network exactly (the USD one read back by usd-core).
+    // eval's caches pass and replay the network (the USD one read back by usd-core): measured
+    // 0.0003 mm for all three against the network's forward pass, an evaluation independent of
+    // eval's sparse skinning (a fault there used to be on both sides: 0 mm whatever it was).
     for file in [&pc2, &mdd, &usdc] {
         let (code, report) = validate_against_model(file, "4", &[]);
         assert_eq!(code, Some(0), "{report}");
@@ -1061,7 +1064,8 @@ fn point_caches() {
             .zip(&want)
             .map(|(a, &b)| (a.as_f64().unwrap() - b as f64).abs())
             .fold(0.0, f64::max);
-        assert!(worst < 1e-5, "frame {frame}: Blender differs by {worst} m");
+        // Measured 0.000044 to 0.000056 mm (f32 through Blender's Mesh Cache).
+        assert!(worst < 5e-7, "frame {frame}: Blender differs by {worst} m");
     }
 }
 
@@ -1092,7 +1096,8 @@ fn usd_files() {
     assert_eq!(code, Some(0), "{good}");
     let r = &good["replay"];
     assert_eq!(r["frames"], 312);
-    assert!(r["max_mm"].as_f64().unwrap() < 0.05, "{r}");
+    // Measured 0.0109 mm (8 of the 32 targets: compression, docs/validate.md's table).
+    assert!(r["max_mm"].as_f64().unwrap() < 0.02, "{r}");
     // Every blend shape's offsets ×1.5, rewritten by usd-core: still a sound file, but off the
     // network by half the morph displacement (weights from 0: see `replay_against_the_model`).
     let scaled = dir.join("shapes_x1.5.usda");
