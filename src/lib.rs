@@ -1,7 +1,7 @@
 //! garmentbake: train neural garment deformers and bake them into standard files.
 //!
 //! Data flows one way; a module imports only modules on layers below its own
-//! (`scripts/layers.sh` checks it):
+//! (docs/architecture.md holds the layer table; `scripts/layers.sh` checks the code against it):
 //!
 //! 1. `geometry`, `fabric`, `compute`, `progress`, `preview`, `build_id` — meshes and maths,
 //!    physical parameters, devices, progress bars, the software rasteriser, which build this is
@@ -11,8 +11,8 @@
 //! 5. `motion`, `garment` — clips loaded onto a skeleton; garments and their fitting
 //! 6. `metrics` — garment metrics of posed frames
 //! 7. `models` — the networks and the model file
-//! 8. `train`, `eval`, `simulate`, `rollout` — training; evaluation over clips; cloth-simulated
-//!    ground truth; dynamic models rolled out frame by frame
+//! 8. `train`, `eval`, `simulate`, `rollout`, `interpolate` — training; evaluation over clips;
+//!    cloth-simulated ground truth; dynamic models rolled out frame by frame; latent walks
 //! 9. `bake`, `compare` — model output → the exporter-neutral baked asset (`exporters::asset`);
 //!    caches against perturbed simulations (spread, own error, e(k), the hem's swing)
 //! 10. `validate` — files checked: structure, and replay against the model

@@ -24,7 +24,8 @@ use clap::{Parser, Subcommand};
 use serde::Serialize;
 
 /// A command as a library call: `execute` does the work and returns a report (serde), `print`
-/// shows it to a person; `--json` prints the report instead. A batch runner calls `execute`.
+/// shows it to a person; `--json` prints the report instead. `batch` does not call it: each job
+/// runs as a child `garmentbake` process (src/batch/run.rs) whose `--json` report is read back.
 pub trait Execute {
     type Report: Serialize;
     /// Runs the command; `say` gets progress notes for a person (a no-op with `--json`).

@@ -1,4 +1,5 @@
-//! `garmentbake preview`: a PNG contact sheet of the posed body (and garments at rest).
+//! `garmentbake preview`: a PNG contact sheet of the posed body, garments at rest, or garments
+//! played by point caches (side by side, or coloured by the distance to a reference).
 
 use super::args::OutputArgs;
 use super::Execute;

@@ -1,4 +1,5 @@
-//! `garmentbake rollout`: a dynamic model played over clips frame by frame, written as a point cache.
+//! `garmentbake rollout`: a dynamic model played over clips frame by frame, written as a point
+//! cache (PC2, MDD, USD) or a compressed glTF, with its errors against reference simulations.
 
 use super::args::{write_cache, write_caches, CollisionFixArgs, ComputeArgs, OutputArgs};
 use super::Execute;

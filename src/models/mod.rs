@@ -1,5 +1,6 @@
-//! Neural garment models (PBNS now; the dynamic model next), their inputs and the one model file
-//! that holds any of them, its kind named in the metadata.
+//! Neural garment models — PBNS (`pbns`, pose-driven) and the motion-guided dynamic model
+//! (`dynamic`: generative space and motion stage) — their inputs and the one model file that
+//! holds any of them, its kind named in the metadata.
 
 pub mod coverage;
 pub mod dynamic;

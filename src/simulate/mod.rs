@@ -55,8 +55,9 @@ pub struct Settings {
 pub const SETTLE_S: f32 = 0.5;
 pub const BLEND_S: f32 = 1.0;
 pub const SPEED_LIMIT: f32 = 30.0;
-/// Each perturbation step lengthens the rest hold by this (s): stop 28's runs 0.1 s apart were
-/// 2–3 mm apart at frame 0 and 30–37 mm over 131_02, independent draws of the skirt's chaos.
+/// Each perturbation step lengthens the rest hold by this (s): runs 0.1 s apart were 2–3 mm
+/// apart at frame 0 and 30–37 mm over 131_02, independent draws of the skirt's chaos
+/// (docs/lab/2026-12-05-dynamic-history.md, "How far apart two simulations of 131_02 are").
 pub const PERTURB_S: f32 = 0.1;
 
 /// The poses and meshes handed to the solver: lead-in and clip, body and pin targets.

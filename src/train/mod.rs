@@ -1,5 +1,6 @@
 //! Training: the machinery every model kind shares (the epoch loop with its progress bar and JSON
-//! log, checkpoints, the NaN guard, Adam) and each kind's trainer (`pbns`; the dynamic one next).
+//! log, checkpoints, the NaN guard, Adam) and each kind's trainer (`pbns`; the dynamic model's
+//! generative space in `dynamic` and its motion stage in `motion`).
 
 pub mod adam;
 pub mod dynamic;

@@ -41,9 +41,9 @@ impl PoseRegression {
     /// Fits with the ridge of `ridges` whose fits on all clips but one predict the clip left out
     /// best (mean square latent error over every clip's frames); `clip [F]` numbers each row's
     /// clip. One clip: its halves stand in for clips. A pose regression must hold for clips it
-    /// was not fitted on, and which ridge does depends on the garment and the clips (stop 33:
-    /// the skirt's best was 0.01, the top's 1), so it is chosen per model, not fixed. A single
-    /// ridge is simply fitted.
+    /// was not fitted on, and which ridge does depends on the garment and the clips (on 131_02
+    /// the skirt's best was 0.01, the top's 1: docs/lab/2026-12-05-dynamic-history.md), so it is
+    /// chosen per model, not fixed. A single ridge is simply fitted.
     pub fn fit_across_clips(
         drive: &Tensor,
         target: &Tensor,
