@@ -21,7 +21,7 @@ fn main() {
     println!("cargo:rerun-if-env-changed=LIBTORCH");
     println!("cargo:rerun-if-env-changed=GARMENTBAKE_CUDA_LINK");
     // GPU builds: keep libtorch_cuda linked even though no symbol of it is referenced directly,
-    // or CUDA stays unavailable at run time (DESIGN.md). Only for the binary, only when asked.
+    // or CUDA stays unavailable at run time (docs/gpu.md). Only for the binary, only when asked.
     if std::env::var_os("GARMENTBAKE_CUDA_LINK").is_some() {
         for arg in [
             "-Wl,--no-as-needed",

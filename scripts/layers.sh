@@ -1,41 +1,78 @@
 #!/usr/bin/env bash
 # Checks that data flows one way through src/: lists the crate:: imports of every top-level
-# module and fails if one imports a module on its own layer or above (the order of src/lib.rs
-# and README's Layout), or if two files of one module import each other. Unit-test modules
-# (a file's trailing `#[cfg(test)] mod`) are not counted.
+# module and fails if one imports a module on its own layer or above, or if two files of one
+# module import each other. Unit-test modules (a file's trailing `#[cfg(test)] mod`) are not
+# counted. The layers are read from the table in docs/architecture.md (between its
+# `<!-- layers:` markers), and the table is checked against the code: every top-level module of
+# src/ listed once, nothing listed that src/ lacks, layers numbered 1.. with no gap, src/lib.rs's
+# `pub mod`s and its header's numbered list equal to the table.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 python3 - "$@" <<'PY'
 import pathlib, re, sys
 
+bad = []
+# The layer table of docs/architecture.md: rows `| N | `a` `b` | ... |` between the markers.
+doc = pathlib.Path("docs/architecture.md")
+rows, inside = {}, False
+for n, line in enumerate(doc.read_text().splitlines(), 1):
+    if line.startswith("<!-- layers: end"):
+        inside = False
+    elif line.startswith("<!-- layers:"):
+        inside = True
+    elif inside and re.match(r"\|\s*\d+\s*\|", line):
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        number, mods = int(cells[0]), re.findall(r"`([a-z_][a-z0-9_]*)`", cells[1])
+        if number in rows:
+            bad.append(f"{doc}:{n}: layer {number} listed twice")
+        if not mods:
+            bad.append(f"{doc}:{n}: layer {number} names no module")
+        rows[number] = (mods, n)
+if not rows:
+    sys.exit(f"{doc}: no layer table between its '<!-- layers:' markers")
+if sorted(rows) != list(range(1, len(rows) + 1)):
+    bad.append(f"{doc}: layers numbered {sorted(rows)}, not 1..{len(rows)}")
 # Lowest first; modules on one line are peers and must not import each other.
-LAYERS = [
-    "geometry fabric compute progress preview build_id",
-    "rig",
-    "body",
-    "io",
-    "motion garment",
-    "metrics",
-    "models",
-    "train eval simulate rollout interpolate",
-    "bake compare",
-    "validate",
-    "batch",
-    "cli",
-]
+LAYERS = [" ".join(rows[k][0]) for k in sorted(rows)]
+listed = {}
+for k in sorted(rows):
+    for m in rows[k][0]:
+        if m in listed:
+            bad.append(f"{doc}:{rows[k][1]}: module '{m}' listed on layers {listed[m]} and {k}")
+        listed.setdefault(m, k)
+src = pathlib.Path("src")
+on_disk = {p.name.removesuffix(".rs"): p for p in src.iterdir()
+           if (p.is_dir() or p.suffix == ".rs") and p.name not in ("lib.rs", "main.rs")}
+for m in sorted(set(listed) - set(on_disk)):
+    bad.append(f"{doc}: lists module '{m}', which src/ does not have (no src/{m}.rs or src/{m}/)")
+for m in sorted(set(on_disk) - set(listed)):
+    bad.append(f"{on_disk[m]}: module '{m}' has no layer in {doc}'s table")
+lib = (src / "lib.rs").read_text()
+declared = set(re.findall(r"^pub mod ([a-z_][a-z0-9_]*);", lib, re.M))
+for m in sorted(declared ^ set(listed)):
+    where = "src/lib.rs declares" if m in declared else f"{doc} lists"
+    bad.append(f"{where} module '{m}', the other does not")
+# src/lib.rs's header repeats the table as `//! N. `a`, `b` — ...`: it must say the same.
+header = {}
+for line in lib.splitlines():
+    m = re.match(r"//! (\d+)\. (.*)", line)
+    if m:
+        header[int(m.group(1))] = re.findall(r"`([a-z_][a-z0-9_]*)`", m.group(2).split(" — ")[0])
+for k in sorted(set(header) | set(rows)):
+    if header.get(k) != (rows[k][0] if k in rows else None):
+        bad.append(f"src/lib.rs header, layer {k}: {header.get(k)} where {doc} has "
+                   f"{rows[k][0] if k in rows else None}")
 layer = {m: i for i, line in enumerate(LAYERS) for m in line.split()}
 src = pathlib.Path("src")
 uses = {}      # top-level module -> {imported top-level module: first place}
 file_uses = {} # file path (module path) -> set of sibling module paths it imports
-bad = []
 for f in sorted(src.rglob("*.rs")):
     rel = f.relative_to(src)
     if rel.name in ("lib.rs", "main.rs") and len(rel.parts) == 1:
         continue
     top = rel.parts[0].removesuffix(".rs")
     if top not in layer:
-        bad.append(f"{f}: module '{top}' has no layer in scripts/layers.sh")
-        continue
+        continue  # reported above: the table lacks it
     parts = [p.removesuffix(".rs") for p in rel.parts]
     if parts[-1] == "mod":
         parts = parts[:-1]
@@ -67,7 +104,7 @@ for i, line in enumerate(LAYERS):
         deps = sorted(uses.get(m, {}), key=lambda d: (layer.get(d, 99), d))
         print(f"{i + 1:>2} {m:<9} imports: {', '.join(deps) or '-'}")
 if bad:
-    print("\nimports against the layer order:", *bad, sep="\n  ", file=sys.stderr)
+    print("\nagainst the layer table (docs/architecture.md):", *bad, sep="\n  ", file=sys.stderr)
     sys.exit(1)
 print("ok: every import points to a lower layer")
 PY

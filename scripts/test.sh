@@ -7,6 +7,7 @@ cd "$root"
 bash scripts/setup.sh
 cargo fmt --all -- --check
 bash scripts/layers.sh
+bash scripts/check_links.sh
 cargo clippy --workspace --all-targets --quiet -- -D warnings
 # The GPU machine's build (docs/gpu.md: --no-default-features, no USD bridge) is compiled, not
 # run; after clippy a check of the binary recompiles only our two crates.
