@@ -1,6 +1,6 @@
 //! `garmentbake train-dynamic`: the motion-guided dynamic model, trained on simulated clips.
 
-use super::args::{ClipArgs, CollisionFixArgs, ComputeArgs, OutputArgs};
+use super::args::{output_set, ClipArgs, CollisionFixArgs, ComputeArgs, OutputArgs, Writes, MODEL};
 use super::Execute;
 use crate::fabric::Fabric;
 use crate::garment::Garment;
@@ -141,6 +141,34 @@ pub struct Args {
     /// steering it).
     #[arg(long, default_value_t = 1.0, value_parser = super::args::non_negative::<f64>())]
     pub drive_ridge: f64,
+    /// Stage dynamic (not in the paper): epochs of the learnt latent dynamics, a small network
+    /// beside the linear integrator fitted through the model's own roll-outs of the training
+    /// clips (windows growing from --unroll-frames' first to its last length, noise on each
+    /// window's start; loss: decoded mm and velocity). 0: the linear integrator alone. Its last
+    /// layer starts at zero, so it only adds what the roll-outs teach it.
+    #[arg(long, default_value_t = 0, value_name = "N")]
+    pub dynamics_epochs: usize,
+    /// Stage dynamic, with --dynamics-epochs: hidden layer widths of the learnt dynamics.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "128,128",
+        value_name = "W,W"
+    )]
+    pub dynamics_widths: Vec<usize>,
+    /// Stage dynamic, with --dynamics-epochs: window length of the roll-outs it is fitted
+    /// through, at the first and the last epoch (frames).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "8,32",
+        value_name = "FIRST,LAST"
+    )]
+    pub unroll_frames: Vec<usize>,
+    /// Stage dynamic, with --dynamics-epochs: noise on each window's starting latent, in units
+    /// of the training latents' spread.
+    #[arg(long, default_value_t = 0.05, value_parser = super::args::non_negative::<f64>())]
+    pub dynamics_noise: f64,
     /// Stage dynamic: channels of the motion features `E_t`.
     #[arg(long, default_value_t = 16)]
     pub motion_features: usize,
@@ -224,6 +252,12 @@ impl Execute for Args {
     type Report = Report;
 
     fn execute(&self, say: &dyn Fn(&str)) -> Result<Report> {
+        // Checked before the training; the trainer writes the model (and its checkpoints)
+        // atomically itself, as it goes.
+        let _checked = output_set(&[
+            ("--out", Some(&self.out), MODEL),
+            ("--log", self.log.as_deref(), Writes::Any),
+        ])?;
         match self.stage {
             StageArg::Space => self.train_space(say),
             StageArg::Dynamic => self.train_motion(say),
@@ -439,6 +473,41 @@ impl Args {
         };
         let done = trainer.epochs_done();
         let fitted = fit(&mut trainer, &self.fit_options())?;
+        if self.dynamics_epochs > 0 {
+            let settings = self.dynamics_settings()?;
+            say(&format!(
+                "learnt dynamics: {} epochs through roll-outs of {}..{} frames",
+                settings.epochs, settings.horizon.0, settings.horizon.1
+            ));
+            let bar =
+                crate::progress::bar(settings.epochs as u64, "learnt dynamics", self.output.json);
+            let fit = crate::train::unroll::fit_model_dynamics(
+                &mut trainer.file,
+                &trainer.data,
+                &settings,
+                &mut |e| {
+                    bar.set_message(format!(
+                        "{} frames: {:.1} mm, {:.0} mm/s",
+                        e.horizon, e.rms_mm, e.velocity_mm_s
+                    ));
+                    bar.set_position(e.epoch as u64);
+                },
+            )?;
+            bar.finish_and_clear();
+            if let Some(last) = fit.history.last() {
+                say(&format!(
+                    "learnt dynamics fitted in {:.0} s: {:.1} mm RMS over the last epoch's {}-frame roll-outs",
+                    fit.seconds, last.rms_mm, last.horizon
+                ));
+            }
+            if let Some(last) = fit.history.last() {
+                say(&format!(
+                    "{} fixed {}-frame training windows rolled out: {:.1} mm RMS with the linear integrator alone, {:.1} mm with the learnt dynamics",
+                    fit.check_windows, last.horizon, fit.base_rms_mm, fit.fitted_rms_mm
+                ));
+            }
+            crate::train::Training::save(&mut trainer, &self.out, false)?;
+        }
         let dynamic = trainer.dynamic();
         let train_err = one_step(dynamic, &trainer.data, fps)?;
         let mut eval_rollout = None;
@@ -507,6 +576,27 @@ impl Args {
         })?;
         bar.finish_and_clear();
         Ok(rounds)
+    }
+
+    /// The learnt dynamics' fit from the flags.
+    fn dynamics_settings(&self) -> Result<crate::models::dynamic::learned::DynamicsSettings> {
+        let [first, last] = self.unroll_frames[..] else {
+            bail!("--unroll-frames takes two lengths, FIRST,LAST (e.g. 8,32)");
+        };
+        if first == 0 || last < first {
+            bail!("--unroll-frames {first},{last}: give 1 ≤ FIRST ≤ LAST");
+        }
+        if self.dynamics_widths.is_empty() || self.dynamics_widths.contains(&0) {
+            bail!("--dynamics-widths: give positive layer widths, e.g. 128,128");
+        }
+        Ok(crate::models::dynamic::learned::DynamicsSettings {
+            widths: self.dynamics_widths.clone(),
+            epochs: self.dynamics_epochs,
+            horizon: (first, last),
+            noise: self.dynamics_noise,
+            seed: self.seed,
+            ..Default::default()
+        })
     }
 
     /// `--pose-settle` unless `--no-pose-settle`.

@@ -145,6 +145,10 @@ pub struct MotionInfo {
     /// integrator alone (models from before it, `--no-pose-settle`).
     #[serde(default)]
     pub settle: Option<Settled>,
+    /// The learnt latent dynamics' fit through roll-outs (`train-dynamic --dynamics-epochs`);
+    /// none: the linear path alone.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dynamics: Option<crate::models::dynamic::learned::DynamicsFit>,
 }
 
 /// How a motion encoder was settled towards the pose (`models::dynamic::settle`).

@@ -260,6 +260,7 @@ impl MotionTrainer {
             history: Vec::new(),
             rollout_rounds: Vec::new(),
             settle: None,
+            dynamics: None,
         };
         dynamic.motion = Some(encoder);
         match &mut file.info.model {

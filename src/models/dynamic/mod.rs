@@ -7,6 +7,7 @@
 //! next frame's latent, rolled out frame after frame.
 
 pub mod frames;
+pub mod learned;
 pub mod motion;
 pub mod seeds;
 pub mod settle;
@@ -77,7 +78,7 @@ impl Dynamic {
                 previous,
                 inertia,
                 drive,
-            } => encoder.linear_latent(inertia, previous, drive),
+            } => encoder.integrate(inertia, previous, drive),
         });
         Ok(match range {
             Some((lo, hi)) => z.clamp_tensor(Some(lo), Some(hi)),

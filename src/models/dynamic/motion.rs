@@ -29,6 +29,7 @@
 //!   the pose; the drive is the pose (and its speed) as a static deformation model sees it.
 
 use super::frames::BodyFrames;
+use super::learned::{self, LearnedDynamics};
 use super::settle::PoseRegression;
 use super::space::Space;
 use serde::{Deserialize, Serialize};
@@ -48,6 +49,10 @@ pub struct MotionShape {
     /// (models from before it).
     #[serde(default)]
     pub drive_joints: Vec<usize>,
+    /// Hidden widths of the learnt latent dynamics `D` (`learned`); none: the linear path
+    /// alone (models from before it, or trained without it).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub dynamics: Vec<usize>,
 }
 
 impl MotionShape {
@@ -58,6 +63,7 @@ impl MotionShape {
             encoder: space_encoder.to_vec(),
             sigma: 0.05,
             drive_joints: Vec::new(),
+            dynamics: Vec::new(),
         }
     }
 
@@ -164,10 +170,14 @@ impl StaticInputs {
     /// `(Z_{t−1}, [Z^ball_t, Z^stay_t])` by the space's linear path alone: all of them when the
     /// space's networks are idle ([`Space::networks_idle`]).
     pub fn linear(space: &Space, h: &History) -> (Tensor, Tensor) {
-        tch::no_grad(|| {
-            let (g, _, m) = Self::stacked(h);
-            Self::split(&space.linear_latent(&g, &m), h.garment[0].size()[0])
-        })
+        tch::no_grad(|| Self::linear_tracked(space, h))
+    }
+
+    /// [`StaticInputs::linear`] with gradients flowing from the history's garments (training
+    /// through the model's own roll-outs, `train::unroll`).
+    pub fn linear_tracked(space: &Space, h: &History) -> (Tensor, Tensor) {
+        let (g, _, m) = Self::stacked(h);
+        Self::split(&space.linear_latent(&g, &m), h.garment[0].size()[0])
     }
 
     /// The three garments to encode (`g_{t−1}` against the body at `t − 1`; the ballistic
@@ -268,6 +278,8 @@ pub struct MotionEncoder {
     encoder_fc: nn::Linear,
     /// The linear path `W` `[L, 3L + 1 + D]` (see the module's notes).
     linear: Tensor,
+    /// The learnt latent dynamics beside `W` (`MotionShape::dynamics`).
+    pub dynamics: Option<LearnedDynamics>,
 }
 
 impl MotionEncoder {
@@ -329,8 +341,17 @@ impl MotionEncoder {
                 .narrow(1, 2 * l, l)
                 .copy_(&Tensor::eye(l, (Kind::Float, device)))
         });
+        let dynamics = (!shape.dynamics.is_empty()).then(|| {
+            LearnedDynamics::new(
+                &(&root / learned::PATH),
+                3 * l + shape.drive_width(),
+                &shape.dynamics,
+                l,
+            )
+        });
         MotionEncoder {
             linear,
+            dynamics,
             vs,
             shape,
             c0_motion,
@@ -381,7 +402,31 @@ impl MotionEncoder {
         };
         let input = Tensor::cat(&[x.static_features.shallow_clone(), e.shallow_clone()], 1);
         let h = self.encoder.forward(&input).flatten(1, -1);
-        self.linear_latent(&inertia, &x.previous_latent, drive) + self.encoder_fc.forward(&h)
+        self.integrate(&inertia, &x.previous_latent, drive) + self.encoder_fc.forward(&h)
+    }
+
+    /// The latent integrator: the linear path `W [...]` plus the learnt dynamics `D(x_t)` when
+    /// the model has them (`learned`).
+    pub fn integrate(&self, inertia: &Tensor, previous: &Tensor, drive: &Tensor) -> Tensor {
+        let linear = self.linear_latent(inertia, previous, drive);
+        match &self.dynamics {
+            Some(d) => linear + d.forward(&LearnedDynamics::inputs(inertia, previous, drive)),
+            None => linear,
+        }
+    }
+
+    /// Gives the encoder learnt dynamics with hidden `widths` (their output zero: the model
+    /// plays as before until `train::unroll` fits them). Replaces any it had.
+    pub fn add_dynamics(&mut self, widths: &[usize]) {
+        let l = self.linear.size()[0];
+        self.shape.dynamics = widths.to_vec();
+        let root = self.vs.root() / "motion";
+        self.dynamics = Some(LearnedDynamics::new(
+            &(&root / learned::PATH),
+            3 * l + self.shape.drive_width(),
+            widths,
+            l,
+        ));
     }
 
     /// `W [Z^ball_t, Z^stay_t, Z_{t−1}, 1, u_t]`: the whole latent when

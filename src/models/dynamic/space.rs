@@ -422,7 +422,19 @@ impl Space {
     /// inverted) and expressed as displacements in the vertices' rest frames, `[B, 3V]`: what
     /// [`Space::canonical`] would have to output to reproduce `g` exactly.
     pub fn rest_displacements(&self, g: &Tensor, m: &Tensor) -> Tensor {
-        let local = self.unskin(g, m);
+        self.local_displacements(&self.unskin(g, m))
+    }
+
+    /// The linear path's latent of garments `g [B, V, 3]` unskinned by per-vertex transforms
+    /// already blended and inverted ([`Space::blended`], [`inverse3`] of its rotations): for
+    /// callers that encode many garments under the same poses (`train::unroll`).
+    pub fn linear_latent_unskinned(&self, g: &Tensor, inverse: &Tensor, shift: &Tensor) -> Tensor {
+        let local = inverse.matmul(&(g - shift).unsqueeze(3)).squeeze_dim(3);
+        (self.local_displacements(&local) - &self.linear_mean).matmul(&self.linear_encode.tr())
+    }
+
+    /// Unskinned garments `[B, V, 3]` as displacements in the vertices' rest frames `[B, 3V]`.
+    fn local_displacements(&self, local: &Tensor) -> Tensor {
         let k = &self.consts;
         Tensor::einsum(
             "vkc,bvc->bvk",

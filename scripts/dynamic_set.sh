@@ -1,0 +1,53 @@
+#!/usr/bin/env bash
+# The dynamic skirt's simulated data (issue 37, "Data"): 21 training takes — the two shipped CMU
+# takes and 19 Character Creator takes of ../shared/data/mocap/cc_base/ (walks, a run of dance
+# turns and jetes, swordplay, punches, basketball dribbles), 5,000+ frames at 30 fps — and three
+# perturbed runs (`simulate --perturb 0/1/2`) of each validation clip, kept apart from training:
+#   131_02 (shipped validation clip: walk, stop, turn), 002_04 (jump, balance),
+#   006_14 (basketball crossover and shot).
+# The cc takes are read through the built-in cc_base map (docs/foundation.md).
+#
+#   bash scripts/dynamic_set.sh [DIR]     # DIR defaults to runs/dynamic_set
+#
+# Writes DIR/TAKE_skirt_sim.pc2 (+ .json figures), DIR/TAKE_skirt_sim_pN.pc2 for the validation
+# runs, and DIR/train.txt: the `--motion/--sim` arguments of the training takes for train-dynamic.
+# A take whose cache is already in DIR is kept (delete it to simulate it again). About 0.45 s per
+# frame of the skirt on 2 cores: ~45 minutes for the training takes, ~10 for the validation runs.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+DIR=${1:-runs/dynamic_set}
+GB=${GB:-target/debug/garmentbake}
+[ -x "$GB" ] || cargo build
+mkdir -p "$DIR"
+CC=../shared/data/mocap/cc_base
+M=samples/motions
+TRAIN="$M/01_01 $M/131_01
+$CC/002_01 $CC/002_05 $CC/002_07 $CC/002_09 $CC/005_01 $CC/005_02 $CC/005_06 $CC/005_07 $CC/005_11
+$CC/005_13 $CC/005_18 $CC/005_20 $CC/006_01 $CC/006_02 $CC/006_10 $CC/006_12 $CC/006_15 $CC/007_03
+$CC/007_12"
+VALIDATION="$M/131_02 $CC/002_04 $CC/006_14"
+sim() { # clip out [extra simulate flags]
+    local clip=$1 out=$2
+    shift 2
+    if [ -s "$out" ]; then
+        echo "kept $out"
+        return
+    fi
+    echo "simulating $(basename "$clip") -> $out $*"
+    "$GB" simulate --body samples/body.glb --garment samples/garments/skirt.obj \
+        --motion "$clip.bvh" --fps 30 --out "$out" "$@" --json > "${out%.pc2}.json"
+}
+ARGS=""
+for clip in $TRAIN; do
+    name=$(basename "$clip")
+    sim "$clip" "$DIR/${name}_skirt_sim.pc2"
+    ARGS="$ARGS --motion $clip.bvh --sim $DIR/${name}_skirt_sim.pc2"
+done
+echo "$ARGS" > "$DIR/train.txt"
+for clip in $VALIDATION; do
+    name=$(basename "$clip")
+    for n in 0 1 2; do
+        sim "$clip" "$DIR/${name}_skirt_sim_p$n.pc2" --perturb $n
+    done
+done
+echo "wrote $DIR: $(echo $TRAIN | wc -w) training takes (train.txt), 3 runs of each of $(echo $VALIDATION | wc -w) validation clips"

@@ -1,0 +1,385 @@
+//! Fitting the learnt latent dynamics `D` (`models::dynamic::learned`) through the model's own
+//! roll-outs. Each step plays windows of K frames: a window starts from a simulated state (its
+//! two previous frames projected into the space, with noise on the latent so the model learns to
+//! recover from states it was not shown), then every frame is the model's own prediction fed
+//! back (linear path + `D`, the space frozen, latents held in the training range as `rollout`
+//! holds them; no collision fix). Loss: the decoded garment's mean squared distance to the
+//! simulated frame (mm²) plus that of its per-frame step (the velocity, weighted), averaged
+//! over the window. K grows from the first to the last horizon over the epochs: short windows
+//! teach the step, long ones the swing and its settling (and the fit sees its own drift).
+//!
+//! Why through roll-outs and not on simulated histories (teacher forcing): the linear path is
+//! already the best one-step fit on simulated histories; what it gets wrong is how its own
+//! errors carry on, which only its own histories show (Venkatraman et al. 2015; the roll-out
+//! rounds of `train::motion` refit `W` the same way, in closed form).
+
+use super::adam::Adam;
+use super::dynamic::FrameData;
+use super::motion::history_indices;
+use crate::models::dynamic::learned::{
+    DynamicsEpoch, DynamicsFit, DynamicsSettings, LearnedDynamics,
+};
+use crate::models::dynamic::motion::{body_drive, History, StaticInputs};
+use crate::models::dynamic::space::inverse3;
+use crate::models::dynamic::Dynamic;
+use crate::models::dynamic::Space;
+use crate::models::file::{KindInfo, ModelFile};
+use crate::models::Model;
+use anyhow::{bail, Result};
+use std::time::Instant;
+use tch::{Kind, Tensor};
+
+/// The window length of epoch `e` (0-based) of `epochs`: linear from the first horizon to the
+/// last.
+pub fn horizon_at(e: usize, epochs: usize, (first, last): (usize, usize)) -> usize {
+    if epochs <= 1 {
+        return last;
+    }
+    let f = e as f64 / (epochs - 1) as f64;
+    (first as f64 + f * (last as f64 - first as f64)).round() as usize
+}
+
+/// Gives `dynamic`'s motion encoder learnt dynamics and fits them on `data` (the training
+/// clips, simulated, at `fps`) through roll-outs; `range` holds the latents as `rollout` does.
+/// `progress(epoch, record)` after every epoch.
+pub fn fit_dynamics(
+    dynamic: &mut Dynamic,
+    data: &FrameData,
+    fps: f64,
+    range: (&Tensor, &Tensor),
+    s: &DynamicsSettings,
+    progress: &mut dyn FnMut(&DynamicsEpoch),
+) -> Result<DynamicsFit> {
+    let clock = Instant::now();
+    let starts = window_starts(data, s.horizon.1.max(s.horizon.0));
+    if starts.is_empty() {
+        bail!(
+            "no training clip is long enough for a {}-frame window (and 3 frames of history)",
+            s.horizon.1
+        );
+    }
+    if s.windows == 0 || s.steps == 0 {
+        bail!("the dynamics fit needs at least one window and one step per epoch");
+    }
+    tch::manual_seed(s.seed as i64);
+    if !dynamic.linear_only() {
+        bail!("the learnt dynamics are fitted beside the linear integrator: train the space and the motion stage with --epochs 0");
+    }
+    let Some(encoder) = dynamic.motion.as_mut() else {
+        bail!("the model has no motion stage to give dynamics to");
+    };
+    encoder.add_dynamics(&s.widths);
+    let encoder = dynamic.motion.as_ref().expect("set above");
+    encoder
+        .dynamics
+        .as_ref()
+        .expect("added above")
+        .normalise_to(&teacher_inputs(dynamic, data, fps));
+    let posed = PosedFrames::new(&dynamic.space, data);
+    let played = Played {
+        dynamic,
+        data,
+        posed: &posed,
+        fps,
+        range,
+    };
+    let check = (32, s.horizon.1);
+    let base_rms_mm = measure(&played, &starts, check.0, check.1);
+    let learned = played
+        .dynamic
+        .motion
+        .as_ref()
+        .and_then(|m| m.dynamics.as_ref())
+        .expect("added above");
+    let params = learned.trainable();
+    let named: Vec<(String, &Tensor)> = params
+        .iter()
+        .enumerate()
+        .map(|(i, t)| (i.to_string(), t))
+        .collect();
+    let mut adam = Adam::new(&named);
+    let latent = played.dynamic.space.shape.latent as i64;
+    let device = data.garment.device();
+    let mut history = Vec::new();
+    for epoch in 0..s.epochs {
+        let k = horizon_at(epoch, s.epochs, s.horizon);
+        let lr = super::cosine_rate(s.learning_rate, epoch, s.epochs);
+        let (mut pos_sum, mut vel_sum) = (0.0, 0.0);
+        for _ in 0..s.steps {
+            let pick = Tensor::randint(
+                starts.len() as i64,
+                [s.windows as i64],
+                (Kind::Int64, device),
+            );
+            let t0: Vec<i64> = Vec::<i64>::try_from(&pick)?
+                .iter()
+                .map(|&i| starts[i as usize] as i64)
+                .collect();
+            let b = s.windows as i64;
+            let shift = Tensor::randn([b, latent], (Kind::Float, device)) * s.noise;
+            let apart = Tensor::randn([b, latent], (Kind::Float, device)) * (s.noise / 3.0);
+            let (pos, vel) = unroll_loss(&played, &t0, k, Some((&(&shift + apart), &shift)));
+            let loss = (&pos + &vel * s.velocity_weight) * 1e6;
+            let value = loss.double_value(&[]);
+            if !value.is_finite() {
+                bail!(
+                    "the dynamics fit's loss became {value} at epoch {}",
+                    epoch + 1
+                );
+            }
+            loss.backward();
+            adam.update(&params, &vec![lr; params.len()]);
+            pos_sum += pos.double_value(&[]);
+            vel_sum += vel.double_value(&[]);
+        }
+        let n = s.steps as f64;
+        let record = DynamicsEpoch {
+            epoch: epoch + 1,
+            horizon: k,
+            rms_mm: (pos_sum / n).sqrt() * 1e3,
+            velocity_mm_s: (vel_sum / n).sqrt() * 1e3 * fps,
+        };
+        progress(&record);
+        history.push(record);
+    }
+    let fitted_rms_mm = measure(&played, &starts, check.0, check.1);
+    Ok(DynamicsFit {
+        settings: s.clone(),
+        history,
+        check_windows: check.0,
+        base_rms_mm,
+        fitted_rms_mm,
+        seconds: clock.elapsed().as_secs_f64(),
+    })
+}
+
+/// [`fit_dynamics`] on a model file with its motion stage (its rate and latent range from its
+/// description), the fit recorded in the description so the file reloads with `D`.
+pub fn fit_model_dynamics(
+    file: &mut ModelFile,
+    data: &FrameData,
+    s: &DynamicsSettings,
+    progress: &mut dyn FnMut(&DynamicsEpoch),
+) -> Result<DynamicsFit> {
+    let info = file.info.dynamic()?;
+    let fps = info.fps as f64;
+    let Some(motion) = &info.motion else {
+        bail!("the model has no motion stage to give dynamics to (train --stage dynamic)");
+    };
+    let device = data.garment.device();
+    let t = |v: &[f32]| Tensor::from_slice(v).unsqueeze(0).to_device(device);
+    let (lo, hi) = (t(&motion.latent_min), t(&motion.latent_max));
+    let Model::Dynamic(dynamic) = &mut file.model else {
+        bail!("this is a PBNS model; the learnt dynamics belong to a dynamic model");
+    };
+    let fit = fit_dynamics(dynamic, data, fps, (&lo, &hi), s, progress)?;
+    if let KindInfo::Dynamic(d) = &mut file.info.model {
+        if let Some(m) = d.motion.as_mut() {
+            m.shape.dynamics = s.widths.clone();
+            m.dynamics = Some(fit.clone());
+        }
+    }
+    Ok(fit)
+}
+
+/// First predicted frames of every window of `k` frames that lies inside one clip with three
+/// frames of history before it.
+fn window_starts(data: &FrameData, k: usize) -> Vec<usize> {
+    let mut ends = data.clip_starts[1..].to_vec();
+    ends.push(data.len());
+    data.clip_starts
+        .iter()
+        .zip(&ends)
+        .flat_map(|(&s, &e)| (s + 3..=e.saturating_sub(k)).filter(move |t| t + k <= e))
+        .collect()
+}
+
+/// `D`'s inputs on every frame's simulated history (its normalisation).
+fn teacher_inputs(dynamic: &Dynamic, data: &FrameData, fps: f64) -> Tensor {
+    let encoder = dynamic.motion.as_ref().expect("a motion stage");
+    let history = history_indices(data, data.garment.device());
+    let parts = crate::models::predict_chunks(data.len(), |start, n| {
+        let idx = data.range(start, n);
+        let back = |k: usize| {
+            data.garment
+                .index_select(0, &history[k].narrow(0, start as i64, n as i64))
+        };
+        let before = data
+            .body
+            .select(&history[0].narrow(0, start as i64, n as i64));
+        let now = data.body.select(&idx);
+        let h = History {
+            garment: [back(0), back(1), back(2)],
+            before,
+            now,
+            fps,
+        };
+        let (previous, inertia) = StaticInputs::linear(&dynamic.space, &h);
+        let drive = body_drive(&h.before, &h.now, &encoder.shape, fps);
+        LearnedDynamics::inputs(&inertia, &previous, &drive)
+    });
+    parts
+}
+
+/// Every training frame's per-vertex seed transforms, blended once (the body never changes
+/// between epochs): rotations, their inverses and translations.
+pub struct PosedFrames {
+    rotation: Tensor,
+    inverse: Tensor,
+    shift: Tensor,
+}
+
+impl PosedFrames {
+    pub fn new(space: &Space, data: &FrameData) -> PosedFrames {
+        let (mut rotation, mut inverse, mut shift) = (Vec::new(), Vec::new(), Vec::new());
+        tch::no_grad(|| {
+            for start in (0..data.len()).step_by(crate::models::PREDICT_CHUNK) {
+                let n = crate::models::PREDICT_CHUNK.min(data.len() - start);
+                let m = data.body.transforms.narrow(0, start as i64, n as i64);
+                let (r, t) = space.blended(&m);
+                inverse.push(inverse3(&r));
+                rotation.push(r);
+                shift.push(t);
+            }
+        });
+        PosedFrames {
+            rotation: Tensor::cat(&rotation, 0),
+            inverse: Tensor::cat(&inverse, 0),
+            shift: Tensor::cat(&shift, 0),
+        }
+    }
+
+    fn at(&self, idx: &Tensor) -> (Tensor, Tensor, Tensor) {
+        (
+            self.rotation.index_select(0, idx),
+            self.inverse.index_select(0, idx),
+            self.shift.index_select(0, idx),
+        )
+    }
+}
+
+/// Mean squared position and step errors (m², per vertex and frame) of windows starting at
+/// frames `t0` and playing `k` frames, from starts shifted by `noise` (latent units, `[B, L]`
+/// pairs for frames t0−1 and t0−2).
+fn unroll_loss(
+    model: &Played,
+    t0: &[i64],
+    k: usize,
+    noise: Option<(&Tensor, &Tensor)>,
+) -> (Tensor, Tensor) {
+    let Played {
+        dynamic,
+        data,
+        posed,
+        fps,
+        range: (lo, hi),
+    } = model;
+    let space = &dynamic.space;
+    let encoder = dynamic.motion.as_ref().expect("a motion stage");
+    let device = data.garment.device();
+    let frames = |offset: i64| {
+        let idx: Vec<i64> = t0.iter().map(|t| t + offset).collect();
+        Tensor::from_slice(&idx).to_device(device)
+    };
+    // The start: the simulated frames t0−1 and t0−2 projected into the space, shifted.
+    let start = |offset: i64, eps: Option<&Tensor>| {
+        tch::no_grad(|| {
+            let idx = frames(offset);
+            let (rot, inv, shift) = posed.at(&idx);
+            let mut z =
+                space.linear_latent_unskinned(&data.garment.index_select(0, &idx), &inv, &shift);
+            if let Some(e) = eps {
+                z += e;
+            }
+            Space::skin_blended(&space.canonical(&z), &(rot, shift))
+        })
+    };
+    let mut g1 = start(-1, noise.map(|n| n.0));
+    let mut g2 = start(-2, noise.map(|n| n.1));
+    let mut pos = Tensor::zeros([], (Kind::Float, device));
+    let mut vel = Tensor::zeros([], (Kind::Float, device));
+    let mut before_idx = frames(-1);
+    let mut before = posed.at(&before_idx);
+    for step in 0..k as i64 {
+        let now_idx = frames(step);
+        let now = posed.at(&now_idx);
+        let (_, inv_before, shift_before) = &before;
+        let (_, inv_now, shift_now) = &now;
+        let ballistic = &g1 * 2.0 - &g2;
+        let previous = space.linear_latent_unskinned(&g1, inv_before, shift_before);
+        let inertia = Tensor::cat(
+            &[
+                space.linear_latent_unskinned(&ballistic, inv_now, shift_now),
+                space.linear_latent_unskinned(&g1, inv_now, shift_now),
+            ],
+            1,
+        );
+        let drive = body_drive(
+            &data.body.select(&before_idx),
+            &data.body.select(&now_idx),
+            &encoder.shape,
+            *fps,
+        );
+        let z = encoder
+            .integrate(&inertia, &previous, &drive)
+            .clamp_tensor(Some(*lo), Some(*hi));
+        let g = Space::skin_blended(
+            &space.canonical(&z),
+            &(now.0.shallow_clone(), now.2.shallow_clone()),
+        );
+        let truth = data.garment.index_select(0, &now_idx);
+        let truth_before = data.garment.index_select(0, &before_idx);
+        pos += (&g - &truth)
+            .square()
+            .sum_dim_intlist(2, false, Kind::Float)
+            .mean(Kind::Float);
+        vel += ((&g - &g1) - (&truth - truth_before))
+            .square()
+            .sum_dim_intlist(2, false, Kind::Float)
+            .mean(Kind::Float);
+        g2 = g1;
+        g1 = g;
+        before_idx = now_idx;
+        before = now;
+    }
+    (pos / k as f64, vel / k as f64)
+}
+
+/// What a window is played with.
+struct Played<'a> {
+    dynamic: &'a Dynamic,
+    data: &'a FrameData,
+    posed: &'a PosedFrames,
+    fps: f64,
+    range: (&'a Tensor, &'a Tensor),
+}
+
+/// RMS vertex distance (mm) of roll-outs over fixed windows: `windows` evenly spaced starts,
+/// `k` frames each, no noise (before and after the fit, on the same windows).
+fn measure(model: &Played, starts: &[usize], windows: usize, k: usize) -> f64 {
+    let step = (starts.len() / windows.max(1)).max(1);
+    let t0: Vec<i64> = starts
+        .iter()
+        .step_by(step)
+        .take(windows)
+        .map(|&t| t as i64)
+        .collect();
+    let mut sum = 0.0;
+    for chunk in t0.chunks(8) {
+        let (pos, _) = tch::no_grad(|| unroll_loss(model, chunk, k, None));
+        sum += pos.double_value(&[]) * chunk.len() as f64;
+    }
+    (sum / t0.len() as f64).sqrt() * 1e3
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn horizons_grow_from_first_to_last() {
+        let h: Vec<usize> = (0..5).map(|e| horizon_at(e, 5, (8, 32))).collect();
+        assert_eq!(h, vec![8, 14, 20, 26, 32]);
+        assert_eq!(horizon_at(0, 1, (8, 32)), 32);
+    }
+}
