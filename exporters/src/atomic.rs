@@ -105,7 +105,7 @@ pub fn replace_via<E: From<std::io::Error>>(
 }
 
 /// One output of an [`OutputSet`]: the flag that names it (for messages), its path, and the
-/// extensions (lower case, without the dot) that flag writes.
+/// extensions (lower case, without the dot) that flag writes (none: any name, such as a log).
 pub struct Planned<'a> {
     pub flag: &'a str,
     pub path: &'a Path,
@@ -143,7 +143,8 @@ impl OutputSet {
                 .path
                 .extension()
                 .map(|e| e.to_string_lossy().to_ascii_lowercase());
-            if !ext.is_some_and(|e| o.extensions.contains(&e.as_str())) {
+            let known = ext.is_some_and(|e| o.extensions.contains(&e.as_str()));
+            if !known && !o.extensions.is_empty() {
                 let list: Vec<String> = o.extensions.iter().map(|e| format!(".{e}")).collect();
                 let list = match list.split_last() {
                     Some((last, rest)) if !rest.is_empty() => {

@@ -344,6 +344,10 @@ pub enum Writes {
     Kinds(&'static [exporters::FileKind]),
     /// A page (`--view PAGE.html`).
     Page,
+    /// A file of one of these extensions (a picture, a joint map).
+    Named(&'static [&'static str]),
+    /// A file of any name (a log).
+    Any,
 }
 
 impl Writes {
@@ -351,6 +355,8 @@ impl Writes {
         match self {
             Writes::Kinds(kinds) => exporters::FileKind::written_extensions(kinds),
             Writes::Page => vec!["html", "htm"],
+            Writes::Named(extensions) => extensions.to_vec(),
+            Writes::Any => vec![],
         }
     }
 }
@@ -361,6 +367,15 @@ pub const POINT_CACHE: Writes = Writes::Kinds(&[
     exporters::FileKind::Mdd,
     exporters::FileKind::Usd,
 ]);
+
+/// A picture (`--out S.png`, `--png`, `--plot-*`).
+pub const PNG: Writes = Writes::Named(&["png"]);
+
+/// A model file (.safetensors).
+pub const MODEL: Writes = Writes::Kinds(&[exporters::FileKind::Model]);
+
+/// A baked asset: glTF (.glb/.gltf) or USD (.usda/.usdc/.usdz).
+pub const ASSET: Writes = Writes::Kinds(&[exporters::FileKind::Gltf, exporters::FileKind::Usd]);
 
 /// A command's outputs, `(flag, path if given, what it writes)`, checked before its work and
 /// written all or none (exporters::atomic::OutputSet).

@@ -1,7 +1,7 @@
 //! `garmentbake compare`: caches of one clip against perturbed simulations of it, measured so
 //! that dynamics show (library: src/compare.rs).
 
-use super::args::{ClipArgs, CollisionFixArgs, ComputeArgs, OutputArgs};
+use super::args::{output_set, ClipArgs, CollisionFixArgs, ComputeArgs, OutputArgs, PNG};
 use super::Execute;
 use crate::compare::{compare, Cache, Inputs, Report, Settings};
 use crate::garment::Garment;
@@ -95,16 +95,11 @@ impl Execute for Args {
     type Report = Report;
 
     fn execute(&self, _say: &dyn Fn(&str)) -> Result<Report> {
-        for png in [&self.plot_horizon, &self.plot_hem].into_iter().flatten() {
-            if png
-                .extension()
-                .and_then(|e| e.to_str())
-                .map(str::to_ascii_lowercase)
-                != Some("png".into())
-            {
-                bail!("{}: plots are written as .png", png.display());
-            }
-        }
+        // Checked before the work; each plot is written atomically as it is drawn.
+        let _checked = output_set(&[
+            ("--plot-horizon", self.plot_horizon.as_deref(), PNG),
+            ("--plot-hem", self.plot_hem.as_deref(), PNG),
+        ])?;
         if self.sims.len() < 2 {
             bail!(
                 "--sim: give two or more simulations of the clip (got {}; e.g. simulate --perturb 0, 1, 2)",

@@ -1,6 +1,6 @@
 //! `garmentbake interpolate`: garments decoded along a straight line between two frames' latents.
 
-use super::args::{write_cache, ComputeArgs, OutputArgs};
+use super::args::{output_set, write_cache, ComputeArgs, OutputArgs, POINT_CACHE};
 use super::Execute;
 use crate::interpolate::between;
 use crate::io::point_cache::read_pc2;
@@ -81,6 +81,7 @@ impl Execute for Args {
         let [a, b] = self.between[..] else {
             bail!("--between takes two frames, A,B");
         };
+        let outputs = output_set(&[("--out", Some(&self.out), POINT_CACHE)])?;
         let (file, _device) = self.compute.load_model(&self.model)?;
         let fps = file.info.dynamic()?.fps;
         let maps = read_maps(&self.maps)?;
@@ -100,7 +101,10 @@ impl Execute for Args {
         }
         let path =
             between(&file, &poses, &sim, (a, b)).with_context(|| format!("--between {a},{b}"))?;
-        write_cache(&self.out, &file.garment, &path.frames, fps)?;
+        outputs.write(&self.out, |p| {
+            write_cache(p, &file.garment, &path.frames, fps)
+        })?;
+        outputs.commit()?;
         let (per_frame, summary) = stats::of(
             &Series::unpinned(&file.body, &file.garment, fps),
             &path.frames,

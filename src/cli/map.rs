@@ -1,8 +1,9 @@
 //! `garmentbake map suggest`: a draft joint map for a clip from a rig we do not know.
 
+use super::args::{output_set, Writes};
 use super::Execute;
 use crate::io::map_suggest::Suggestion;
-use anyhow::{bail, Context, Result};
+use anyhow::Result;
 use serde::Serialize;
 use std::path::PathBuf;
 
@@ -59,16 +60,12 @@ impl Execute for Args {
 
     fn execute(&self, _say: &dyn Fn(&str)) -> Result<Report> {
         let Action::Suggest(a) = &self.action;
-        if let Some(out) = &a.out {
-            if out.extension().is_none_or(|e| e != "toml") {
-                bail!("{}: --out must be a .toml file", out.display());
-            }
-        }
+        let outputs = output_set(&[("--out", a.out.as_deref(), Writes::Named(&["toml"]))])?;
         let suggestion = crate::motion::suggest_map(&a.clip)?;
         let toml = suggestion.to_toml(&a.clip.display().to_string());
         if let Some(out) = &a.out {
-            exporters::atomic::write_atomic(out, toml.as_bytes())
-                .with_context(|| format!("writing {}", out.display()))?;
+            outputs.write(out, |p| exporters::atomic::write_atomic(p, toml.as_bytes()))?;
+            outputs.commit()?;
         }
         Ok(Report {
             clip: a.clip.clone(),

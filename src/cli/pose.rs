@@ -1,6 +1,6 @@
 //! `garmentbake pose`: the body with a retargeted joint animation per clip, as glTF or USD.
 
-use super::args::{ClipArgs, OutputArgs};
+use super::args::{output_set, ClipArgs, OutputArgs, ASSET};
 use super::Execute;
 use crate::bake::{animation_asset, skeleton_asset, skinned_mesh_asset, BODY_COLOR};
 use crate::io::gltf_body::read_body;
@@ -55,6 +55,7 @@ impl Execute for Args {
     type Report = Report;
 
     fn execute(&self, say: &dyn Fn(&str)) -> Result<Report> {
+        let outputs = output_set(&[("--out", Some(&self.out), ASSET)])?;
         let body = read_body(&self.body)?;
         let reader = self.clips.reader()?;
         let mut asset = exporters::BakedAsset {
@@ -109,8 +110,10 @@ impl Execute for Args {
                 .push((format!("clip:{}", a.name), path.display().to_string()));
         }
         bar.finish_and_clear();
-        exporters::write(&asset, &self.out)
-            .with_context(|| format!("writing {}", self.out.display()))?;
+        outputs.write(&self.out, |p| {
+            exporters::write(&asset, p).with_context(|| format!("writing {}", p.display()))
+        })?;
+        outputs.commit()?;
         Ok(Report {
             out: self.out.clone(),
             clips,

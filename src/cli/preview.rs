@@ -1,7 +1,7 @@
 //! `garmentbake preview`: a PNG contact sheet of the posed body, garments at rest, or garments
 //! played by point caches (side by side, or coloured by the distance to a reference).
 
-use super::args::OutputArgs;
+use super::args::{output_set, OutputArgs, PNG};
 use super::Execute;
 use crate::eval::model_frames;
 use crate::garment::Garment;
@@ -152,6 +152,7 @@ impl Execute for Args {
 }
 
 fn render(args: &Args) -> Result<Report> {
+    let outputs = output_set(&[("--out", Some(&args.out), PNG)])?;
     let body = read_body(&args.body)?;
     let model = match &args.model {
         Some(path) => {
@@ -350,7 +351,9 @@ fn render(args: &Args) -> Result<Report> {
         framing: FramingMode::PerPanel,
         ..Default::default()
     };
-    save_png(&contact_sheet(&panels, &opts), &args.out)?;
+    let sheet = contact_sheet(&panels, &opts);
+    outputs.write(&args.out, |p| save_png(&sheet, p))?;
+    outputs.commit()?;
     Ok(Report {
         out: args.out.clone(),
         panels: panels.len(),

@@ -1,6 +1,6 @@
 //! `garmentbake train`: unsupervised PBNS training of a garment on a body and motion clips.
 
-use super::args::{OutputArgs, TrainInputs, TRAIN_DEFAULTS};
+use super::args::{output_set, OutputArgs, TrainInputs, Writes, MODEL, TRAIN_DEFAULTS};
 use super::Execute;
 use crate::models::file::EpochRecord;
 use crate::train::pbns::{PhaseSplit, Trainer};
@@ -88,6 +88,12 @@ impl Execute for Args {
     type Report = Report;
 
     fn execute(&self, say: &dyn Fn(&str)) -> Result<Report> {
+        // Checked before the training; the trainer writes the model (and its checkpoints)
+        // atomically itself, as it goes.
+        let _checked = output_set(&[
+            ("--out", Some(&self.out), MODEL),
+            ("--log", self.log.as_deref(), Writes::Any),
+        ])?;
         let (inputs, mut settings, warnings) = self.inputs.load(self.epochs, self.strict)?;
         settings.patience = self.patience.map(|p| p as usize);
         for w in &warnings {

@@ -1,6 +1,6 @@
 //! `garmentbake upgrade`: a model file written by an earlier garmentbake, in the current format.
 
-use super::args::OutputArgs;
+use super::args::{output_set, OutputArgs, MODEL};
 use super::Execute;
 use crate::models::file::{self, Upgraded};
 use anyhow::Result;
@@ -37,8 +37,16 @@ impl Execute for Args {
     type Report = Report;
 
     fn execute(&self, _say: &dyn Fn(&str)) -> Result<Report> {
-        let out = self.out.clone().unwrap_or_else(|| self.model.clone());
-        let upgraded = file::upgrade(&self.model, &out)?;
+        // Replacing MODEL needs no check: its folder is there, its name is what it is.
+        let outputs = output_set(&[("--out", self.out.as_deref(), MODEL)])?;
+        let (out, upgraded) = match &self.out {
+            Some(out) => {
+                let upgraded = outputs.write(out, |p| file::upgrade(&self.model, p))?;
+                outputs.commit()?;
+                (out.clone(), upgraded)
+            }
+            None => (self.model.clone(), file::upgrade(&self.model, &self.model)?),
+        };
         Ok(Report {
             model: self.model.clone(),
             out,

@@ -1,6 +1,6 @@
 //! `garmentbake validate`: the pipeline gate — exit 0 only when a file is right.
 
-use super::args::{ClipArgs, ComputeArgs, OutputArgs};
+use super::args::{output_set, ClipArgs, ComputeArgs, OutputArgs, PNG};
 use super::Execute;
 use crate::validate::replay::{error_png, Reference, ReplayError};
 use crate::validate::{check_file, checkable, Checked, Problem};
@@ -115,6 +115,7 @@ impl Execute for Args {
     type Report = Report;
 
     fn execute(&self, _say: &dyn Fn(&str)) -> Result<Report> {
+        let outputs = output_set(&[("--png", self.png.as_deref(), PNG)])?;
         let path = &self.file;
         let kind = checkable(path)?;
         if !self.tolerance_mm.is_finite() || self.tolerance_mm <= 0.0 {
@@ -125,7 +126,8 @@ impl Execute for Args {
         let mut png = None;
         if let (Some(r), Some(reference)) = (&replay, &reference) {
             if let Some(path) = &self.png {
-                error_png(reference, r, path)?;
+                outputs.write(path, |p| error_png(reference, r, p))?;
+                outputs.commit()?;
                 png = Some(path.clone());
             }
         }

@@ -2,7 +2,7 @@
 //! page, written to disk or served on 127.0.0.1. Also the `--view PAGE.html` of bake, eval and
 //! rollout.
 
-use super::args::OutputArgs;
+use super::args::{output_set, OutputArgs, Writes};
 use super::Execute;
 use crate::bake::{animation_asset, skeleton_asset, skinned_mesh_asset, BODY_COLOR};
 use crate::body::Body;
@@ -93,6 +93,7 @@ impl Execute for Args {
         if self.fps.is_some_and(|f| f.is_nan() || f <= 0.0) {
             bail!("--fps must be positive");
         }
+        let outputs = output_set(&[("--out", self.out.as_deref(), Writes::Page)])?;
         let glb = read_glb(&self.file)?;
         let scene = Scene::of(&glb, &self.file)?;
         let caches = self
@@ -128,7 +129,8 @@ impl Execute for Args {
         };
         match &self.out {
             Some(out) => {
-                let bytes = write_page(out, &page)?;
+                let bytes = outputs.write(out, |p| write_page(p, &page))?;
+                outputs.commit()?;
                 Ok(report(Some(out.clone()), bytes))
             }
             None => {

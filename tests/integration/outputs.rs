@@ -388,3 +388,211 @@ gltf = {{ max_targets = 4 }}
         .collect();
     assert!(left.is_empty(), "left on the full disk: {left:?}");
 }
+
+/// Every command that writes files, each output flag: a bad extension or a missing folder is one
+/// `error:` line naming the flag, exit code 2, before any work (the inputs given do not exist,
+/// so a command that read them first would name them instead), nothing written. The flags are
+/// found through clap: an output flag added later without a row here fails the test.
+#[test]
+fn every_output_is_checked_before_any_work() {
+    // (command words, output flag, an extension it writes ("" for any name), the other flags).
+    let model = ["--model", "missing.safetensors"];
+    let clip = ["--motion", "missing.bvh"];
+    let body = ["--body", "missing.glb", "--garment", "missing.obj"];
+    let cases: Vec<(&[&str], &str, &str, Vec<&str>)> = vec![
+        (
+            &["pose"],
+            "out",
+            "glb",
+            [&clip[..], &["--body", "missing.glb"]].concat(),
+        ),
+        (&["bake"], "out", "usdc", [&model[..], &clip].concat()),
+        (
+            &["bake"],
+            "view",
+            "html",
+            [&model[..], &clip, &["--out", "x.glb"]].concat(),
+        ),
+        (&["preview"], "out", "png", vec!["--body", "missing.glb"]),
+        (
+            &["interpolate"],
+            "out",
+            "pc2",
+            [&model[..], &clip, &["--sim", "s.pc2", "--between", "0,1"]].concat(),
+        ),
+        (&["map", "suggest"], "out", "toml", vec!["missing.bvh"]),
+        (
+            &["upgrade"],
+            "out",
+            "safetensors",
+            vec!["missing.safetensors"],
+        ),
+        (
+            &["train"],
+            "out",
+            "safetensors",
+            [&body[..], &clip].concat(),
+        ),
+        (
+            &["train"],
+            "log",
+            "",
+            [&body[..], &clip, &["--out", "m.safetensors"]].concat(),
+        ),
+        (
+            &["train-dynamic"],
+            "out",
+            "safetensors",
+            [&body[..], &clip, &["--sim", "s.pc2", "--fps", "30"]].concat(),
+        ),
+        (
+            &["train-dynamic"],
+            "log",
+            "",
+            [
+                &body[..],
+                &clip,
+                &["--sim", "s.pc2", "--fps", "30", "--out", "m.safetensors"],
+            ]
+            .concat(),
+        ),
+        (
+            &["validate"],
+            "png",
+            "png",
+            [&["missing.glb"][..], &model, &clip].concat(),
+        ),
+        (&["view"], "out", "html", vec!["missing.glb"]),
+        (
+            &["compare"],
+            "plot-horizon",
+            "png",
+            [
+                &body[..],
+                &clip,
+                &["--fps", "30", "--sim", "a.pc2", "--sim", "b.pc2"],
+            ]
+            .concat(),
+        ),
+        (
+            &["compare"],
+            "plot-hem",
+            "png",
+            [
+                &body[..],
+                &clip,
+                &["--fps", "30", "--sim", "a.pc2", "--sim", "b.pc2"],
+            ]
+            .concat(),
+        ),
+        (
+            &["simulate"],
+            "out",
+            "usdc",
+            [&body[..], &clip, &["--fps", "30"]].concat(),
+        ),
+        (
+            &["simulate"],
+            "body-out",
+            "pc2",
+            [&body[..], &clip, &["--fps", "30", "--out", "s.pc2"]].concat(),
+        ),
+        (&["eval"], "out", "pc2", [&model[..], &clip].concat()),
+        (
+            &["eval"],
+            "body-out",
+            "pc2",
+            [&model[..], &clip, &["--out", "e.pc2"]].concat(),
+        ),
+        (
+            &["eval"],
+            "view",
+            "html",
+            [&model[..], &clip, &["--out", "e.pc2"]].concat(),
+        ),
+        (&["rollout"], "out", "glb", [&model[..], &clip].concat()),
+        (
+            &["rollout"],
+            "lbs-out",
+            "pc2",
+            [&model[..], &clip, &["--out", "r.pc2"]].concat(),
+        ),
+        (
+            &["rollout"],
+            "body-out",
+            "pc2",
+            [&model[..], &clip, &["--out", "r.pc2"]].concat(),
+        ),
+        (
+            &["rollout"],
+            "view",
+            "html",
+            [&model[..], &clip, &["--out", "r.pc2"]].concat(),
+        ),
+    ];
+    // Every output flag clap knows, but for batch's --out (a folder, made if missing).
+    const OUTPUT_FLAGS: [&str; 8] = [
+        "out",
+        "body-out",
+        "lbs-out",
+        "view",
+        "png",
+        "plot-horizon",
+        "plot-hem",
+        "log",
+    ];
+    fn walk(cmd: &clap::Command, words: &[String], out: &mut Vec<String>) {
+        for arg in cmd.get_arguments() {
+            if let Some(long) = arg.get_long().filter(|l| OUTPUT_FLAGS.contains(l)) {
+                out.push(format!("{} --{long}", words.join(" ")));
+            }
+        }
+        for sub in cmd.get_subcommands() {
+            let mut w = words.to_vec();
+            w.push(sub.get_name().to_string());
+            walk(sub, &w, out);
+        }
+    }
+    let mut flags = Vec::new();
+    walk(&garmentbake::cli::command(), &[], &mut flags);
+    let covered: Vec<String> = cases
+        .iter()
+        .map(|(words, flag, _, _)| format!("{} --{flag}", words.join(" ")))
+        .collect();
+    let missing: Vec<&String> = flags
+        .iter()
+        .filter(|f| !covered.contains(f) && !f.starts_with("batch "))
+        .collect();
+    assert!(missing.is_empty(), "output flags with no case: {missing:?}");
+
+    let dir = out_dir("outputs_checked_first");
+    let check = |(words, flag, ext, rest): &(&[&str], &str, &str, Vec<&str>)| {
+        let bad_names = [
+            (dir.join("out.bad"), "unknown extension"),
+            (dir.join(format!("none/out.{ext}")), "no folder"),
+        ];
+        for (path, why) in &bad_names {
+            if ext.is_empty() && *why == "unknown extension" {
+                continue; // any name will do
+            }
+            let flag_arg = format!("--{flag}");
+            let mut args: Vec<&str> = words.to_vec();
+            args.extend(rest.iter().copied());
+            args.extend([flag_arg.as_str(), path.to_str().unwrap()]);
+            let err = one_error_line(&run(&args), path);
+            assert!(
+                err.starts_with(&format!("error: {flag_arg} {}", path.display()))
+                    && err.contains(why),
+                "{args:?}: {err}"
+            );
+        }
+    };
+    // Two at a time: each run is mostly the binary starting (libtorch loading).
+    let (odd, even): (Vec<_>, Vec<_>) = cases.iter().enumerate().partition(|(i, _)| i % 2 == 1);
+    std::thread::scope(|s| {
+        let other = s.spawn(|| odd.iter().for_each(|(_, c)| check(c)));
+        even.iter().for_each(|(_, c)| check(c));
+        other.join().unwrap();
+    });
+    assert!(tree(&dir).is_empty(), "written: {:?}", tree(&dir));
+}
