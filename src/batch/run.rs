@@ -2,6 +2,7 @@
 //! in it), skipped when its outputs already carry its key; and the local runner, which keeps up
 //! to N jobs going in dependency order and skips the dependents of a failed job.
 
+use super::ledger::{out_of_space, Ledger};
 use super::plan::{Job, Plan};
 use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
@@ -91,8 +92,15 @@ pub fn up_to_date(job: &Job) -> bool {
 
 /// Runs `job` with the binary `exe` unless it is up to date, retrying up to `retries` times a
 /// run that ended for a reason other than bad input (exit 2) or a failed check (exit 1): a
-/// crash, a kill, a lost machine.
-pub fn run_job(job: &Job, exe: &Path, retries: usize, figures: &Figures) -> Outcome {
+/// crash, a kill, a lost machine. What it writes (folders, log, report, keys) goes in `ledger`;
+/// a job that succeeds keeps its files there.
+pub fn run_job(
+    job: &Job,
+    exe: &Path,
+    retries: usize,
+    figures: &Figures,
+    ledger: &Ledger,
+) -> Outcome {
     if up_to_date(job) {
         let mut done = Outcome::of(job, Status::UpToDate);
         let report = std::fs::read(&job.report)
@@ -102,8 +110,13 @@ pub fn run_job(job: &Job, exe: &Path, retries: usize, figures: &Figures) -> Outc
     }
     let mut outcome = Outcome::of(job, Status::Failed);
     let start = Instant::now();
-    match attempts(job, exe, retries, figures, &mut outcome) {
-        Ok(()) => outcome.status = Status::Ran,
+    match attempts(job, exe, retries, figures, ledger, &mut outcome) {
+        Ok(()) => {
+            outcome.status = Status::Ran;
+            let files = job.outputs.iter().chain([&job.report]);
+            let keys: Vec<PathBuf> = files.clone().map(|p| key_path(p)).collect();
+            ledger.keep(files.chain(&keys).chain([&job.log]));
+        }
         Err(e) => outcome.error = Some(one_line(&e)),
     }
     outcome.seconds = start.elapsed().as_secs_f64();
@@ -139,19 +152,24 @@ fn attempts(
     exe: &Path,
     retries: usize,
     figures: &Figures,
+    ledger: &Ledger,
     outcome: &mut Outcome,
 ) -> Result<()> {
     // A stale key must not vouch for what this run is about to replace.
     for p in job.outputs.iter().chain([&job.report]) {
         let _ = std::fs::remove_file(key_path(p));
         if let Some(dir) = p.parent() {
-            std::fs::create_dir_all(dir)
+            ledger
+                .create_dir_all(dir)
                 .with_context(|| format!("cannot create {}", dir.display()))?;
         }
     }
     let logs = job.log.parent().unwrap_or(Path::new("."));
-    std::fs::create_dir_all(logs).with_context(|| format!("cannot create {}", logs.display()))?;
-    let mut log = std::fs::File::create(&job.log)
+    ledger
+        .create_dir_all(logs)
+        .with_context(|| format!("cannot create {}", logs.display()))?;
+    let mut log = ledger
+        .create(&job.log)
         .with_context(|| format!("cannot write {}", job.log.display()))?;
     loop {
         outcome.attempts += 1;
@@ -180,7 +198,7 @@ fn attempts(
         // Any JSON is kept as the report, a failed check's too (its figures say by how much).
         let report = serde_json::from_slice::<serde::de::IgnoredAny>(&run.stdout).is_ok();
         if report {
-            exporters::atomic::write_atomic(&job.report, &run.stdout)?;
+            ledger.write(&job.report, &run.stdout)?;
             read_figures(outcome, job, figures(&job.kind, &run.stdout));
         }
         match run.status.code() {
@@ -199,7 +217,7 @@ fn attempts(
     }
     // Keys last, report's last of all: a job killed before this point runs again.
     for p in job.outputs.iter().chain([&job.report]) {
-        exporters::atomic::write_atomic(&key_path(p), job.key.as_bytes())?;
+        ledger.write(&key_path(p), job.key.as_bytes())?;
     }
     Ok(())
 }
@@ -223,14 +241,25 @@ fn error_line(log: &Path, code: i32) -> String {
     }
 }
 
-/// Runs the plan here with up to `jobs` at a time; `done` hears of each job as it ends.
-/// Returns one outcome per job, in plan order.
+/// The job that stopped a run: it failed for lack of space (its own write or the runner's), so
+/// the jobs after it would too. `batch run` then stops, takes back what it wrote
+/// ([`Ledger::roll_back`]) and says so in one error line.
+pub fn out_of_space_failure(outcomes: &[Outcome]) -> Option<&Outcome> {
+    outcomes
+        .iter()
+        .find(|o| o.status == Status::Failed && o.error.as_deref().is_some_and(out_of_space))
+}
+
+/// Runs the plan here with up to `jobs` at a time; `done` hears of each job as it ends. A job
+/// that fails for lack of space stops the run: no job starts after it (those left are skipped),
+/// the running ones finish. Returns one outcome per job, in plan order.
 pub fn run_local(
     plan: &Plan,
     exe: &Path,
     jobs: usize,
     retries: usize,
     figures: &Figures,
+    ledger: &Ledger,
     done: &dyn Fn(&Outcome),
 ) -> Vec<Outcome> {
     let n = plan.jobs.len();
@@ -253,20 +282,27 @@ pub fn run_local(
         (0..n).filter(|&i| waiting[i] == 0).collect();
     let mut outcomes: Vec<Option<Outcome>> = vec![None; n];
     let (tx, rx) = std::sync::mpsc::channel::<(usize, Outcome)>();
+    let mut stopped_by: Option<String> = None;
     std::thread::scope(|scope| {
         let mut running = 0;
         let mut finished = 0;
         while finished < n {
-            while running < jobs.max(1) {
+            while running < jobs.max(1) && stopped_by.is_none() {
                 let Some(i) = ready.pop_front() else { break };
                 running += 1;
                 let (tx, job) = (tx.clone(), &plan.jobs[i]);
                 scope.spawn(move || {
-                    let _ = tx.send((i, run_job(job, exe, retries, figures)));
+                    let _ = tx.send((i, run_job(job, exe, retries, figures, ledger)));
                 });
+            }
+            if running == 0 {
+                break; // stopped: nothing runs, nothing more starts
             }
             let (i, o) = rx.recv().expect("a job thread reports");
             running -= 1;
+            if out_of_space_failure(std::slice::from_ref(&o)).is_some() {
+                stopped_by.get_or_insert_with(|| o.id.clone());
+            }
             // The finished job, then any dependents that are now skipped, in turn.
             let mut ended = vec![(i, o)];
             while let Some((i, o)) = ended.pop() {
@@ -290,6 +326,11 @@ pub fn run_local(
     });
     outcomes
         .into_iter()
-        .map(|o| o.expect("every job ends"))
+        .zip(&plan.jobs)
+        .map(|(o, job)| match (o, &stopped_by) {
+            (Some(o), _) => o,
+            (None, Some(up)) => Outcome::skipped(job, up),
+            (None, None) => Outcome::skipped(job, "the run"), // not reached: every job ends
+        })
         .collect()
 }

@@ -3,9 +3,10 @@
 
 use super::args::OutputArgs;
 use super::Execute;
+use crate::batch::ledger::Ledger;
 use crate::batch::manifest;
 use crate::batch::plan::{plan, Plan};
-use crate::batch::run::{run_job, run_local, Outcome, Status};
+use crate::batch::run::{out_of_space_failure, run_job, run_local, Outcome, Status};
 use anyhow::{bail, Context, Result};
 use serde::de::DeserializeOwned;
 use serde::Serialize;
@@ -120,14 +121,16 @@ pub struct RunReport {
 }
 
 impl PlanArgs {
-    fn plan(&self) -> Result<Plan> {
+    /// The plan; the output folder is created if missing (noted in `ledger`).
+    fn plan(&self, ledger: &Ledger) -> Result<Plan> {
         let resolved = manifest::read(&self.manifest)?;
         let out = match (&self.out, &resolved.manifest.out) {
             (Some(o), _) => o.clone(),
             (None, Some(o)) => o.clone(),
             (None, None) => bail!("{}: no `out` folder; give --out", self.manifest.display()),
         };
-        std::fs::create_dir_all(&out)
+        ledger
+            .create_dir_all(&out)
             .with_context(|| format!("cannot create {}", out.display()))?;
         let out = out
             .canonicalize()
@@ -141,10 +144,30 @@ fn exe() -> Result<PathBuf> {
 }
 
 impl RunArgs {
+    /// A run that stops for lack of space (its own write or a job's) is one error, and leaves
+    /// nothing it wrote but the finished jobs' files.
     fn run(&self, say: &dyn Fn(&str)) -> Result<RunReport> {
-        let plan = self.plan.plan()?;
+        let ledger = Ledger::default();
+        let report =
+            self.run_noting(&ledger, say)
+                .and_then(|r| match out_of_space_failure(&r.jobs) {
+                    Some(o) => bail!(
+                        "{}: {}; the run stopped and took back what it wrote",
+                        o.id,
+                        o.error.as_deref().unwrap_or_default()
+                    ),
+                    None => Ok(r),
+                });
+        if report.is_err() {
+            ledger.roll_back();
+        }
+        report
+    }
+
+    fn run_noting(&self, ledger: &Ledger, say: &dyn Fn(&str)) -> Result<RunReport> {
+        let plan = self.plan.plan(ledger)?;
         let saved = plan.out.join("plan.json");
-        exporters::atomic::write_atomic(&saved, serde_json::to_string_pretty(&plan)?.as_bytes())?;
+        ledger.write(&saved, serde_json::to_string_pretty(&plan)?.as_bytes())?;
         let exe = exe()?;
         let start = Instant::now();
         let jobs = match &self.ray {
@@ -164,7 +187,15 @@ impl RunArgs {
                         bar.println(line(o, &plan.out));
                     }
                 };
-                let outcomes = run_local(&plan, &exe, self.jobs, self.retries, &figures, &done);
+                let outcomes = run_local(
+                    &plan,
+                    &exe,
+                    self.jobs,
+                    self.retries,
+                    &figures,
+                    ledger,
+                    &done,
+                );
                 bar.finish_and_clear();
                 outcomes
             }
@@ -193,7 +224,7 @@ impl Execute for Args {
         match &self.what {
             What::Plan(p) => {
                 let start = Instant::now();
-                let plan = p.plan()?;
+                let plan = p.plan(&Ledger::default())?;
                 Ok(Report::Plan {
                     plan,
                     seconds: start.elapsed().as_secs_f64(),
@@ -210,7 +241,14 @@ impl Execute for Args {
                     .iter()
                     .find(|x| x.id == j.id)
                     .with_context(|| format!("{}: no job '{}'", j.plan.display(), j.id))?;
-                Ok(Report::Job(run_job(job, &exe()?, j.retries, &figures)))
+                let ledger = Ledger::default(); // a job of a farm's run: kept as it ends
+                Ok(Report::Job(run_job(
+                    job,
+                    &exe()?,
+                    j.retries,
+                    &figures,
+                    &ledger,
+                )))
             }
         }
     }

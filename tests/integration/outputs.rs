@@ -313,10 +313,11 @@ fn rollout_outputs_are_checked_first_and_fail_together_on_a_full_disk() {
 }
 
 /// `batch run` with its output folder on a full disk: its plan and logs fit, the training job's
-/// files do not. The job fails with one line naming the file; no job output, report or
-/// temporary file is left (only the plan, the logs and their folders); exit code 1.
+/// files do not. The run stops with one error line naming the job and the file, exit code 2,
+/// and takes back all it wrote: an output folder it created is gone, one that was there gets
+/// its old plan back and keeps nothing else (no log, report, key or temporary file).
 #[test]
-fn batch_run_on_a_full_disk_fails_the_job_and_leaves_no_output() {
+fn batch_run_on_a_full_disk_is_one_error_and_leaves_nothing() {
     let dir = out_dir("outputs_full_batch");
     let manifest = dir.join("batch.toml");
     std::fs::write(
@@ -348,45 +349,42 @@ gltf = {{ max_targets = 4 }}
     .unwrap();
     let disk = FullDisk::mount("outputs_full_batch_disk");
     let out = disk.dir.join("out");
-    let o = Command::new(env!("CARGO_BIN_EXE_garmentbake"))
-        .args(["batch", "run"])
-        .arg(&manifest)
-        .arg("--out")
-        .arg(&out)
-        .arg("--json")
-        .output()
-        .unwrap();
-    let report: serde_json::Value = serde_json::from_slice(&o.stdout)
-        .unwrap_or_else(|e| panic!("no report ({e}): {}", String::from_utf8_lossy(&o.stderr)));
-    assert_eq!(o.status.code(), Some(1), "{report:#}");
-    let train = report["jobs"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|j| j["id"] == "train:skirt")
-        .unwrap();
-    assert_eq!(train["status"], "failed", "{report:#}");
-    let error = train["error"].as_str().unwrap();
-    assert!(
-        error.contains("No space left on device")
-            && error.contains(&*out.to_string_lossy())
-            && !error.contains('\n'),
-        "{error}"
+    let batch = || {
+        Command::new(env!("CARGO_BIN_EXE_garmentbake"))
+            .args(["batch", "run"])
+            .arg(&manifest)
+            .arg("--out")
+            .arg(&out)
+            .arg("--json")
+            .output()
+            .unwrap()
+    };
+    let check = |o: &std::process::Output| {
+        assert!(
+            o.stdout.is_empty(),
+            "{}",
+            String::from_utf8_lossy(&o.stdout)
+        );
+        let err = the_error_line(o, &out.join("skirt"));
+        assert!(
+            err.contains("train:skirt")
+                && err.contains("No space left on device")
+                && err.contains(&*out.to_string_lossy()),
+            "{err}"
+        );
+    };
+    // A fresh output folder: the run created it, so it goes too.
+    check(&batch());
+    disk.assert_nothing_left(&[]);
+    // A folder an earlier run left: its plan is put back, nothing of this run stays.
+    std::fs::create_dir(&out).unwrap();
+    std::fs::write(out.join("plan.json"), b"the earlier plan").unwrap();
+    check(&batch());
+    assert_eq!(tree(&disk.dir), ["filler", "out", "out/plan.json"]);
+    assert_eq!(
+        std::fs::read(out.join("plan.json")).unwrap(),
+        b"the earlier plan"
     );
-    assert_eq!(report["ran"], 0, "{report:#}");
-    // What the batch keeps for itself: the plan, the job's log, the (empty) output folders.
-    let kept = [
-        "out",
-        "out/plan.json",
-        "out/logs",
-        "out/reports",
-        "out/skirt",
-    ];
-    let left: Vec<String> = tree(&disk.dir)
-        .into_iter()
-        .filter(|p| p != "filler" && !kept.contains(&p.as_str()) && !p.starts_with("out/logs/"))
-        .collect();
-    assert!(left.is_empty(), "left on the full disk: {left:?}");
 }
 
 /// Every command that writes files, each output flag: a bad extension or a missing folder is one
