@@ -167,21 +167,35 @@ pub struct OutputArgs {
     pub json: bool,
 }
 
-/// The per-frame collision fix of a dynamic roll-out (`rollout`, and `train-dynamic
-/// --rollout-fix`'s rounds): a garment that crosses the body is pushed out by a residual map
-/// optimised in UV space.
+/// The per-frame strain limit and collision fix of a dynamic roll-out (`rollout`, `compare`, and
+/// `train-dynamic`'s rounds, whose fix is on with --rollout-fix): the decoded garment's edges
+/// pulled back towards their rest lengths, and a garment that crosses the body pushed out.
 #[derive(clap::Args)]
 pub struct CollisionFixArgs {
-    /// Adam iterations of the collision fix on a frame that needs it.
-    #[arg(long, default_value_t = 20)]
-    pub collision_iterations: usize,
+    /// How the collision fix resolves a frame: `projection` pushes the crossing vertices out and
+    /// keeps the edges around them (plain arrays, ~1 ms a frame); `paper` is the paper's Adam
+    /// fit of a UV displacement map through libtorch (~100 ms a frame).
+    #[arg(long, value_enum, default_value_t = crate::rollout::Solver::Projection)]
+    pub collision_solver: crate::rollout::Solver,
+    /// Passes of the projection fix, or Adam iterations of the paper's (default 8 and 20).
+    #[arg(long)]
+    pub collision_iterations: Option<usize>,
     /// Clearance the collision fix keeps from the body (mm).
     #[arg(long, default_value_t = 2.0, value_parser = non_negative::<f32>())]
     pub collision_margin_mm: f32,
-    /// Weight of the collision fix's edge-length term, which keeps the pushed-out garment from
+    /// Weight of the paper fix's edge-length term, which keeps the pushed-out garment from
     /// stretching; 0 gives the paper's objective (position + Laplacian + collision only).
     #[arg(long, default_value_t = crate::rollout::LAMBDA_EDGES, value_parser = non_negative::<f64>())]
     pub collision_edge_weight: f64,
+    /// Strain limit: sweeps per frame that pull the decoded garment's edges back within
+    /// --strain-band-pct of their rest lengths, before the collision fix (0: off, the decode as
+    /// it is).
+    #[arg(long, default_value_t = crate::rollout::STRAIN_ITERATIONS)]
+    pub strain_iterations: usize,
+    /// How far (% of rest length) an edge may stretch or shrink before the strain limit (and the
+    /// projection fix) pull it back.
+    #[arg(long, default_value_t = 100.0 * crate::rollout::STRAIN_BAND, value_parser = non_negative::<f32>())]
+    pub strain_band_pct: f32,
 }
 
 impl CollisionFixArgs {
@@ -191,11 +205,17 @@ impl CollisionFixArgs {
         if !(w >= 0.0 && w.is_finite()) {
             bail!("--collision-edge-weight {w}: give a weight of 0 or more (0: the paper's objective)");
         }
+        let solver = self.collision_solver;
         Ok(crate::rollout::Settings {
             collision_fix: fix,
-            iterations: self.collision_iterations,
+            solver,
+            iterations: self
+                .collision_iterations
+                .unwrap_or(solver.default_iterations()),
             margin: self.collision_margin_mm * 1e-3,
             edge_weight: w,
+            strain_iterations: self.strain_iterations,
+            strain_band: self.strain_band_pct * 1e-2,
             ..crate::rollout::Settings::default()
         })
     }

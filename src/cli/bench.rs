@@ -2,14 +2,14 @@
 //! `garmentbake bench rollout`: a dynamic model's roll-out against Blender's cloth solver on the
 //! same frames, in the same run.
 
-use super::args::{ComputeArgs, OutputArgs, TrainInputs};
+use super::args::{CollisionFixArgs, ComputeArgs, OutputArgs, TrainInputs};
 use super::rollout::{timing, Timing};
 use super::Execute;
 use crate::fabric::Fabric;
 use crate::garment::Garment;
 use crate::io::gltf_body::read_body;
 use crate::motion::{load_clip, read_maps};
-use crate::rollout::{for_model, Init, Settings};
+use crate::rollout::{for_model, Init};
 use crate::simulate::{self, Scene};
 use crate::train::pbns::{RefreshMode, StepBench, Trainer};
 use anyhow::bail;
@@ -58,6 +58,8 @@ struct RolloutBench {
     /// Frames of the clip, from its start.
     #[arg(long, default_value_t = 60)]
     frames: usize,
+    #[command(flatten)]
+    collision: CollisionFixArgs,
     #[command(flatten)]
     compute: ComputeArgs,
     #[command(flatten)]
@@ -144,10 +146,7 @@ impl RolloutBench {
         let quiet = self.output.json;
         let roll = |fix: bool| -> Result<Timing> {
             let bar = crate::progress::bar(poses.len() as u64, "roll-out", quiet);
-            let settings = Settings {
-                collision_fix: fix,
-                ..Settings::default()
-            };
+            let settings = self.collision.settings(fix)?;
             let r = for_model(&file, &poses, &Init::Rest, settings, &mut |f| {
                 bar.set_position(f as u64 + 1)
             })?;
@@ -182,7 +181,7 @@ impl RolloutBench {
         })?;
         bar.finish_and_clear();
         let simulate_ms = 1e3 * clock.elapsed().as_secs_f64() / poses.len() as f64;
-        let total = |t: &Timing| t.network_ms + t.collision_ms;
+        let total = |t: &Timing| t.network_ms + t.strain_ms + t.collision_ms;
         let e = outcome.entry;
         let solver_ms = 1e3 * e.seconds / e.simulated_frames.max(1) as f64;
         Ok(RolloutTimes {
@@ -256,8 +255,8 @@ fn print_rollout(t: &RolloutTimes) {
     );
     let row = |name: &str, x: &Timing, total: f64| {
         println!(
-            "{name}: {total:.1} ms per frame (input maps {:.1}, encoder {:.1}, decode + skinning {:.1}, collision {:.1}; fix on {} frames)",
-            x.inputs_ms, x.encoder_ms, x.decode_ms, x.collision_ms, x.fixed_frames
+            "{name}: {total:.1} ms per frame (input maps {:.1}, encoder {:.1}, decode + skinning {:.1}, strain limit {:.1}, collision {:.1}; fix on {} frames)",
+            x.inputs_ms, x.encoder_ms, x.decode_ms, x.strain_ms, x.collision_ms, x.fixed_frames
         )
     };
     row("roll-out, no collision fix", &t.plain, t.plain_ms);

@@ -12,6 +12,7 @@ pub mod mesh;
 pub mod nearest;
 pub mod normals;
 pub mod sdf_grid;
+pub mod strain_limit;
 pub mod topology;
 pub mod winding;
 
@@ -23,6 +24,7 @@ pub use laplacian::Laplacian;
 pub use mesh::{FaceVaryingUv, MeshError, TriMesh};
 pub use nearest::{NearestError, PointIndex};
 pub use normals::{face_normals, vertex_normals};
+pub use strain_limit::StrainLimit;
 pub use topology::{Hinge, Topology};
 pub use winding::SurfaceIndex;
 

@@ -1,44 +1,82 @@
 //! Rolling a dynamic model out over a pose sequence: each frame's prediction is the next
-//! frame's history. Per frame, when the garment crosses the body (the paper's collision loss
-//! `Σ ReLU(−o)`, `o = (g − b)·n` against the nearest posed body vertex, above a threshold), a
-//! residual displacement map `Θ` in UV space (bilinear per vertex, in the vertices' rest frames)
-//! is optimised with Adam for `|G̃ − G|₁ + |ΔG̃ − ΔG|₁ + λ3·L_collision` (λ3 = 100) and the
-//! resolved garment is fed forward (paper Sec. 5.1). One term beyond the paper keeps the edge
-//! lengths the garment had before the fix ([`LAMBDA_EDGES`]).
+//! frame's history. Per frame, the decoded garment's edges are pulled back towards their rest
+//! lengths (strain limiting: the linear decode stretches and shrinks them by ~16 % where cloth
+//! keeps them within ~2 %), then, when the garment crosses the body (the paper's collision loss
+//! `Σ ReLU(−o)`, `o = (g − b)·n` against the nearest posed body vertex, above a threshold), the
+//! crossing vertices are pushed out and the edges around them kept ([`contact`]; the paper's
+//! Adam fit of a UV displacement map is [`paper_fix`], an option). The resolved garment is fed
+//! forward (paper Sec. 5.1).
 
-use crate::body::{nearest_offsets, Body};
-use crate::geometry::PointIndex;
+pub mod contact;
+pub mod paper_fix;
+pub mod surface;
+
+use crate::body::Body;
+use crate::geometry::StrainLimit;
 use crate::models::dynamic::motion::History;
-use crate::models::dynamic::{BodyFrames, Dynamic, MeshEdges, MeshLaplacian, Seeds, Space};
+use crate::models::dynamic::{BodyFrames, Dynamic, MeshEdges, MeshLaplacian, Seeds};
 use crate::models::file::ModelFile;
 use crate::rig::JointTransform;
 use anyhow::{bail, Result};
-use serde::Serialize;
+use paper_fix::{Decoded, ShapeTerms};
+use serde::{Deserialize, Serialize};
 use std::time::Instant;
-use tch::nn::{self, OptimizerConfig};
-use tch::{Kind, Tensor};
+use surface::{Planes, PosedSurface};
+use tch::Tensor;
 
-/// λ3 of the collision objective.
-pub const LAMBDA_COLLISION: f64 = 100.0;
-/// Weight of the collision fix's edge-length term (not in the paper): without it the fix
+pub use paper_fix::LAMBDA_COLLISION;
+
+/// Weight of the paper fix's edge-length term (not in the paper): without it the fix
 /// stretches the garment it pushes out (a vertex squeezed between two limbs is pushed out of one
 /// into the other) and the stretched garment is fed forward. Chosen on 131_02 (docs/dynamic.md).
 pub const LAMBDA_EDGES: f64 = 10.0;
+
+/// How far an edge may stretch or shrink before the strain limit pulls it back (fraction of
+/// its rest length). Simulations of the skirt have mean strains of 1.5–3 %.
+pub const STRAIN_BAND: f32 = 0.02;
+/// Gauss–Seidel sweeps of the strain limit per frame.
+pub const STRAIN_ITERATIONS: usize = 20;
+
+/// How the collision fix resolves a frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Solver {
+    /// Push the crossing vertices out, keep the edges around them (plain arrays, ~1 ms).
+    #[default]
+    Projection,
+    /// The paper's Adam fit of a UV displacement map through libtorch (~100 ms).
+    Paper,
+}
+
+impl Solver {
+    /// Passes of the projection, Adam iterations of the paper's fit.
+    pub fn default_iterations(self) -> usize {
+        match self {
+            Solver::Projection => 8,
+            Solver::Paper => 20,
+        }
+    }
+}
 
 #[derive(Clone, Debug)]
 pub struct Settings {
     /// Resolve collisions per frame (the paper's test-time optimisation).
     pub collision_fix: bool,
+    pub solver: Solver,
     /// Distance outside the body a vertex must keep (metres): `o` is measured against it.
     pub margin: f32,
-    /// Optimise only when `Σ ReLU(margin − o)` exceeds this (metres, summed over vertices).
+    /// Fix only when `Σ ReLU(margin − o)` exceeds this (metres, summed over vertices).
     pub threshold: f64,
+    /// Projection passes or Adam iterations ([`Solver::default_iterations`]).
     pub iterations: usize,
     pub learning_rate: f64,
-    /// Weight of the edge-length term `Σ_e ||G̃_e| − |G_e||` (0: the paper's objective).
+    /// The paper fix's edge-length term `Σ_e ||G̃_e| − |G_e||` (0: the paper's objective).
     pub edge_weight: f64,
-    /// Texels per side of the residual map `Θ`.
+    /// Texels per side of the paper fix's residual map `Θ`.
     pub map: i64,
+    /// Strain limit sweeps after each decode (0: off) and its band (see [`STRAIN_BAND`]).
+    pub strain_iterations: usize,
+    pub strain_band: f32,
     /// Per latent dimension, the range the roll-out is held in (the model's training range).
     pub latent_range: Option<(Vec<f32>, Vec<f32>)>,
     /// Measure the collision loss when the fix is off (posing the body and indexing it costs
@@ -50,12 +88,15 @@ impl Default for Settings {
     fn default() -> Settings {
         Settings {
             collision_fix: true,
+            solver: Solver::Projection,
             margin: 0.002,
             threshold: 0.001,
-            iterations: 20,
+            iterations: Solver::Projection.default_iterations(),
             learning_rate: 0.002,
             edge_weight: LAMBDA_EDGES,
             map: 32,
+            strain_iterations: STRAIN_ITERATIONS,
+            strain_band: STRAIN_BAND,
             latent_range: None,
             measure_collisions: true,
         }
@@ -81,7 +122,9 @@ pub struct FrameTiming {
     pub inputs_ms: f64,
     pub encoder_ms: f64,
     pub decode_ms: f64,
-    /// Collision check and, when it fires, the optimisation.
+    /// The strain limit after the decode.
+    pub strain_ms: f64,
+    /// Collision check and, when it fires, the fix.
     pub collision_ms: f64,
     pub collision_iterations: usize,
 }
@@ -93,27 +136,6 @@ pub struct Rollout {
     /// Collision loss `Σ ReLU(margin − o)` (metres) per frame before and after the fix.
     pub collision_before: Vec<f64>,
     pub collision_after: Vec<f64>,
-}
-
-/// The posed body of one frame for the collision term: points, normals, nearest-point index.
-struct PosedSurface {
-    points: Vec<[f32; 3]>,
-    normals: Vec<[f32; 3]>,
-    index: PointIndex,
-}
-
-impl PosedSurface {
-    fn new(body: &Body, pose: &[JointTransform]) -> Result<PosedSurface> {
-        let skinning = body.skeleton.skinning_matrices(pose);
-        let points = body.skin.skin_points(&body.mesh.positions, &skinning);
-        let normals = body.skin.skin_normals(&body.normals, &skinning);
-        let index = PointIndex::new(&points)?;
-        Ok(PosedSurface {
-            points,
-            normals,
-            index,
-        })
-    }
 }
 
 fn to_points(t: &Tensor) -> Vec<[f32; 3]> {
@@ -128,6 +150,14 @@ fn to_tensor(points: &[[f32; 3]], device: tch::Device) -> Tensor {
         .to_device(device)
 }
 
+/// The garment a roll-out plays: its triangles, and its rest shape and pinned vertices (what
+/// the strain limit and the projection fix keep).
+pub struct GarmentShape<'a> {
+    pub rest: &'a [[f32; 3]],
+    pub triangles: &'a [[u32; 3]],
+    pub pinned: &'a [u32],
+}
+
 /// Rolls `model` out over `poses` (at `fps`, the model's rate). `progress` is called after
 /// every frame.
 #[allow(clippy::too_many_arguments)]
@@ -135,7 +165,7 @@ pub fn roll_out(
     model: &Dynamic,
     body: &Body,
     seeds: &Seeds,
-    triangles: &[[u32; 3]],
+    garment: &GarmentShape,
     poses: &[Vec<JointTransform>],
     fps: f64,
     init: &Init,
@@ -160,10 +190,11 @@ pub fn roll_out(
     let Some(first) = start.last().cloned() else {
         bail!("the roll-out's start has no garment");
     };
-    let shape = ShapeTerms {
-        laplacian: MeshLaplacian::new(triangles, first.len(), device),
-        edges: MeshEdges::new(triangles, device),
-    };
+    let limit = StrainLimit::new(garment.rest, garment.triangles, garment.pinned);
+    let shape = (settings.solver == Solver::Paper).then(|| ShapeTerms {
+        laplacian: MeshLaplacian::new(garment.triangles, first.len(), device),
+        edges: MeshEdges::new(garment.triangles, device),
+    });
     let range = settings.latent_range.as_ref().map(|(lo, hi)| {
         let t = |v: &[f32]| Tensor::from_slice(v).unsqueeze(0).to_device(device);
         (t(lo), t(hi))
@@ -193,30 +224,54 @@ pub fn roll_out(
         timing.encoder_ms = ms(clock);
         let clock = Instant::now();
         let canonical = tch::no_grad(|| space.canonical(&z));
-        let garment = tch::no_grad(|| space.skin(&canonical, &h.now.transforms));
+        let skinned = tch::no_grad(|| space.skin(&canonical, &h.now.transforms));
+        let mut points = to_points(&skinned);
         timing.decode_ms = ms(clock);
         let clock = Instant::now();
-        let (resolved, before, after, iterations) =
-            if settings.collision_fix || settings.measure_collisions {
-                resolve_collisions(
-                    model,
-                    &canonical,
-                    &garment,
-                    &h.now.transforms,
-                    &PosedSurface::new(body, pose)?,
-                    &shape,
-                    settings,
-                )
-            } else {
-                (garment, 0.0, 0.0, 0)
-            };
+        limit.project(
+            &mut points,
+            settings.strain_band,
+            settings.strain_iterations,
+        );
+        timing.strain_ms = ms(clock);
+        let clock = Instant::now();
+        let (mut before, mut after, mut iterations) = (0.0, 0.0, 0);
+        if settings.collision_fix || settings.measure_collisions {
+            let planes = Planes::of(&points, &PosedSurface::new(body, pose)?);
+            before = planes.loss(&points, settings.margin);
+            after = before;
+            if settings.collision_fix && before > settings.threshold {
+                iterations = settings.iterations;
+                match &shape {
+                    None => contact::push_out(
+                        &mut points,
+                        &planes,
+                        &limit,
+                        settings.margin,
+                        settings.strain_band,
+                        settings.iterations,
+                    ),
+                    Some(shape) => {
+                        let decoded = Decoded {
+                            canonical: &canonical,
+                            transforms: &h.now.transforms,
+                            skinned: &skinned,
+                        };
+                        let g = to_tensor(&points, device);
+                        let fixed =
+                            paper_fix::resolve(space, &decoded, &g, &planes, shape, settings);
+                        points = to_points(&fixed);
+                    }
+                }
+                after = planes.loss(&points, settings.margin);
+            }
+        }
         timing.collision_ms = ms(clock);
         timing.collision_iterations = iterations;
-        let points = to_points(&resolved);
         if points.iter().flatten().any(|x| !x.is_finite()) {
             bail!("the roll-out produced a non-finite vertex at frame {t}");
         }
-        history.push(resolved);
+        history.push(to_tensor(&points, device));
         if history.len() > HISTORY {
             drop(history.remove(0));
         }
@@ -247,11 +302,16 @@ pub fn for_model(
             .map(|m| (m.latent_min.clone(), m.latent_max.clone()));
     }
     let seeds = Seeds::from_vertices(&file.body, &info.seeds, &info.seed_parts)?;
+    let garment = GarmentShape {
+        rest: &file.garment.positions,
+        triangles: &file.garment.triangles,
+        pinned: &file.info.garment.pinned,
+    };
     roll_out(
         model,
         &file.body,
         &seeds,
-        &file.garment.triangles,
+        &garment,
         poses,
         info.fps as f64,
         init,
@@ -262,79 +322,4 @@ pub fn for_model(
 
 fn ms(since: Instant) -> f64 {
     since.elapsed().as_secs_f64() * 1e3
-}
-
-/// Each vertex's nearest posed body vertex as tensors: positions and normals `[1, V, 3]`.
-fn nearest_planes(garment: &Tensor, surface: &PosedSurface) -> (Tensor, Tensor) {
-    let points = to_points(garment);
-    let nearest = nearest_offsets(&points, &surface.points, &surface.normals, &surface.index);
-    let pick = |of: &[[f32; 3]]| {
-        let v: Vec<[f32; 3]> = nearest.iter().map(|&(b, _)| of[b as usize]).collect();
-        to_tensor(&v, garment.device())
-    };
-    (pick(&surface.points), pick(&surface.normals))
-}
-
-/// `Σ ReLU(margin − o)` with `o = (g − b)·n`.
-fn collision_loss(g: &Tensor, planes: &(Tensor, Tensor), margin: f32) -> Tensor {
-    let o = ((g - &planes.0) * &planes.1).sum_dim_intlist(2, false, Kind::Float);
-    (-(o - margin as f64)).relu().sum(Kind::Float)
-}
-
-/// The garment's operators the collision fix keeps its shape with.
-struct ShapeTerms {
-    laplacian: MeshLaplacian,
-    edges: MeshEdges,
-}
-
-/// The paper's test-time fix: when the collision loss passes the threshold, optimise `Θ` for
-/// `|G̃ − G|₁ + |ΔG̃ − ΔG|₁ + λ3·L_collision`, plus `λ_e·Σ_e ||G̃_e| − |G_e||` (edge lengths
-/// kept). Returns the garment, the loss before and after, and the iterations run.
-fn resolve_collisions(
-    model: &Dynamic,
-    canonical: &Tensor,
-    garment: &Tensor,
-    transforms: &Tensor,
-    surface: &PosedSurface,
-    shape: &ShapeTerms,
-    s: &Settings,
-) -> (Tensor, f64, f64, usize) {
-    let planes = nearest_planes(garment, surface);
-    let before = tch::no_grad(|| collision_loss(garment, &planes, s.margin).double_value(&[]));
-    if !s.collision_fix || before <= s.threshold {
-        return (garment.shallow_clone(), before, before, 0);
-    }
-    let space = &model.space;
-    let vs = nn::VarStore::new(garment.device());
-    let theta = vs.root().zeros("theta", &[1, 3, s.map, s.map]);
-    let Ok(mut opt) = nn::Adam::default().build(&vs, s.learning_rate) else {
-        return (garment.shallow_clone(), before, before, 0);
-    };
-    let target_laplacian = tch::no_grad(|| shape.laplacian.of(garment));
-    // Weight 0 is the paper's objective: the edge term is then left out, not computed at zero.
-    let target_lengths =
-        (s.edge_weight > 0.0).then(|| tch::no_grad(|| shape.edges.lengths(garment)));
-    // The pose is fixed over the iterations: blend the seeds' transforms once.
-    let blended = tch::no_grad(|| space.blended(transforms));
-    let resolved = |theta: &Tensor| {
-        let offsets = space.at_vertices(theta);
-        Space::skin_blended(&space.offset_canonical(canonical, &offsets), &blended)
-    };
-    for _ in 0..s.iterations {
-        let g = resolved(&theta);
-        let mut loss = (&g - garment).abs().sum(Kind::Float)
-            + (shape.laplacian.of(&g) - &target_laplacian)
-                .abs()
-                .sum(Kind::Float);
-        if let Some(lengths) = &target_lengths {
-            loss += (shape.edges.lengths(&g) - lengths).abs().sum(Kind::Float) * s.edge_weight;
-        }
-        loss += collision_loss(&g, &planes, s.margin) * LAMBDA_COLLISION;
-        opt.zero_grad();
-        loss.backward();
-        opt.step();
-    }
-    let g = tch::no_grad(|| resolved(&theta));
-    let after = tch::no_grad(|| collision_loss(&g, &planes, s.margin).double_value(&[]));
-    (g, before, after, s.iterations)
 }
