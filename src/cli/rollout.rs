@@ -25,9 +25,11 @@ use std::path::PathBuf;
 /// then becomes the next frame's history. Clips are resampled to the rate the model was trained
 /// at (recorded in the output). Several --motion clips play one after another as one roll-out:
 /// each later clip starts where the previous one ended, its first frames blended from the last
-/// pose (--fade). Per frame, a garment that crosses the body is pushed out by a residual
-/// displacement map optimised in the garment's UV space (the paper's test-time collision fix;
-/// --no-collision-fix to see the network alone).
+/// pose (--fade). Per frame, the decoded garment's edges are pulled back within 2 % of their
+/// rest lengths (the strain limit), and a garment that crosses the body is pushed out, the edges
+/// around the pushed vertices kept (the collision fix; --collision-solver paper: the paper's
+/// Adam fit of a UV displacement map). --no-collision-fix --strain-iterations 0 shows the
+/// network alone.
 ///
 /// Writes the garment per frame as a point cache (.pc2, Blender's Mesh Cache reads it; .usda/
 /// .usdc/.usd: time-sampled points). --reference SIM.pc2 (a `simulate` cache of the same clip)
