@@ -223,6 +223,10 @@ pub struct Report {
     pub eval_rollout: Option<(String, Reconstruction)>,
     /// Stage dynamic: how the model was settled towards the pose's garment; none: not settled.
     pub settle: Option<Settled>,
+    /// Stage dynamic: the learnt dynamics' fit (`--dynamics-epochs`); none: the linear
+    /// integrator alone.
+    #[serde(default)]
+    pub dynamics: Option<crate::models::dynamic::learned::DynamicsFit>,
 }
 
 /// Clips and their simulations, checked against each other.
@@ -386,6 +390,7 @@ impl Args {
             rollout_rounds: Vec::new(),
             eval_rollout: None,
             settle: None,
+            dynamics: None,
             fitted,
         })
     }
@@ -550,6 +555,7 @@ impl Args {
             rollout_rounds: rounds,
             eval_rollout,
             settle: trainer.info().settle,
+            dynamics: trainer.info().dynamics.clone(),
             fitted,
         })
     }
@@ -595,6 +601,9 @@ impl Args {
             horizon: (first, last),
             noise: self.dynamics_noise,
             seed: self.seed,
+            // The fit plays the frames as `rollout` does by default.
+            strain_band: RolloutSettings::default().strain_band,
+            strain_iterations: RolloutSettings::default().strain_iterations,
             ..Default::default()
         })
     }

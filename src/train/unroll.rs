@@ -16,6 +16,7 @@
 use super::adam::Adam;
 use super::dynamic::FrameData;
 use super::motion::history_indices;
+use crate::geometry::strain_limit::StrainLimit;
 use crate::models::dynamic::learned::{
     DynamicsEpoch, DynamicsFit, DynamicsSettings, LearnedDynamics,
 };
@@ -47,6 +48,7 @@ pub fn fit_dynamics(
     data: &FrameData,
     fps: f64,
     range: (&Tensor, &Tensor),
+    limit: &StrainLimit,
     s: &DynamicsSettings,
     progress: &mut dyn FnMut(&DynamicsEpoch),
 ) -> Result<DynamicsFit> {
@@ -82,6 +84,7 @@ pub fn fit_dynamics(
         posed: &posed,
         fps,
         range,
+        limit: (s.strain_iterations > 0).then_some((limit, s.strain_band, s.strain_iterations)),
     };
     let check = (32, s.horizon.1);
     let base_rms_mm = measure(&played, &starts, check.0, check.1);
@@ -111,9 +114,9 @@ pub fn fit_dynamics(
                 [s.windows as i64],
                 (Kind::Int64, device),
             );
-            let t0: Vec<i64> = Vec::<i64>::try_from(&pick)?
+            let t0: Vec<Window> = Vec::<i64>::try_from(&pick)?
                 .iter()
-                .map(|&i| starts[i as usize] as i64)
+                .map(|&i| starts[i as usize])
                 .collect();
             let b = s.windows as i64;
             let shift = Tensor::randn([b, latent], (Kind::Float, device)) * s.noise;
@@ -169,10 +172,15 @@ pub fn fit_model_dynamics(
     let device = data.garment.device();
     let t = |v: &[f32]| Tensor::from_slice(v).unsqueeze(0).to_device(device);
     let (lo, hi) = (t(&motion.latent_min), t(&motion.latent_max));
+    let limit = StrainLimit::new(
+        &file.garment.positions,
+        &file.garment.triangles,
+        &file.info.garment.pinned,
+    );
     let Model::Dynamic(dynamic) = &mut file.model else {
         bail!("this is a PBNS model; the learnt dynamics belong to a dynamic model");
     };
-    let fit = fit_dynamics(dynamic, data, fps, (&lo, &hi), s, progress)?;
+    let fit = fit_dynamics(dynamic, data, fps, (&lo, &hi), &limit, s, progress)?;
     if let KindInfo::Dynamic(d) = &mut file.info.model {
         if let Some(m) = d.motion.as_mut() {
             m.shape.dynamics = s.widths.clone();
@@ -182,15 +190,29 @@ pub fn fit_model_dynamics(
     Ok(fit)
 }
 
-/// First predicted frames of every window of `k` frames that lies inside one clip with three
-/// frames of history before it.
-fn window_starts(data: &FrameData, k: usize) -> Vec<usize> {
+/// A window: its first predicted frame and its clip's first frame (history before the clip
+/// is the clip's first frame held still, as `history_indices` and a roll-out from rest have it).
+#[derive(Clone, Copy, Debug)]
+struct Window {
+    first: i64,
+    clip: i64,
+}
+
+/// Every window of `k` frames that lies inside one clip after its first frame.
+fn window_starts(data: &FrameData, k: usize) -> Vec<Window> {
     let mut ends = data.clip_starts[1..].to_vec();
     ends.push(data.len());
     data.clip_starts
         .iter()
         .zip(&ends)
-        .flat_map(|(&s, &e)| (s + 3..=e.saturating_sub(k)).filter(move |t| t + k <= e))
+        .flat_map(|(&s, &e)| {
+            (s + 1..=e.saturating_sub(k))
+                .filter(move |t| t + k <= e)
+                .map(move |t| Window {
+                    first: t as i64,
+                    clip: s as i64,
+                })
+        })
         .collect()
 }
 
@@ -198,7 +220,7 @@ fn window_starts(data: &FrameData, k: usize) -> Vec<usize> {
 fn teacher_inputs(dynamic: &Dynamic, data: &FrameData, fps: f64) -> Tensor {
     let encoder = dynamic.motion.as_ref().expect("a motion stage");
     let history = history_indices(data, data.garment.device());
-    let parts = crate::models::predict_chunks(data.len(), |start, n| {
+    crate::models::predict_chunks(data.len(), |start, n| {
         let idx = data.range(start, n);
         let back = |k: usize| {
             data.garment
@@ -217,8 +239,7 @@ fn teacher_inputs(dynamic: &Dynamic, data: &FrameData, fps: f64) -> Tensor {
         let (previous, inertia) = StaticInputs::linear(&dynamic.space, &h);
         let drive = body_drive(&h.before, &h.now, &encoder.shape, fps);
         LearnedDynamics::inputs(&inertia, &previous, &drive)
-    });
-    parts
+    })
 }
 
 /// Every training frame's per-vertex seed transforms, blended once (the body never changes
@@ -263,7 +284,7 @@ impl PosedFrames {
 /// pairs for frames t0−1 and t0−2).
 fn unroll_loss(
     model: &Played,
-    t0: &[i64],
+    t0: &[Window],
     k: usize,
     noise: Option<(&Tensor, &Tensor)>,
 ) -> (Tensor, Tensor) {
@@ -273,12 +294,13 @@ fn unroll_loss(
         posed,
         fps,
         range: (lo, hi),
+        limit,
     } = model;
     let space = &dynamic.space;
     let encoder = dynamic.motion.as_ref().expect("a motion stage");
     let device = data.garment.device();
     let frames = |offset: i64| {
-        let idx: Vec<i64> = t0.iter().map(|t| t + offset).collect();
+        let idx: Vec<i64> = t0.iter().map(|w| (w.first + offset).max(w.clip)).collect();
         Tensor::from_slice(&idx).to_device(device)
     };
     // The start: the simulated frames t0−1 and t0−2 projected into the space, shifted.
@@ -327,6 +349,10 @@ fn unroll_loss(
             &space.canonical(&z),
             &(now.0.shallow_clone(), now.2.shallow_clone()),
         );
+        let g = match limit {
+            Some(l) => strain_limited(&g, l),
+            None => g,
+        };
         let truth = data.garment.index_select(0, &now_idx);
         let truth_before = data.garment.index_select(0, &before_idx);
         pos += (&g - &truth)
@@ -352,18 +378,41 @@ struct Played<'a> {
     posed: &'a PosedFrames,
     fps: f64,
     range: (&'a Tensor, &'a Tensor),
+    /// The roll-out's strain limit, its band and sweeps.
+    limit: Option<(&'a StrainLimit, f32, usize)>,
+}
+
+/// Garments `g [B, V, 3]` strain-limited as `rollout` feeds them forward; gradients pass
+/// straight through (the limit is a projection on plain arrays, outside the graph).
+fn strain_limited(g: &Tensor, (limit, band, iterations): &(&StrainLimit, f32, usize)) -> Tensor {
+    let moved = tch::no_grad(|| {
+        let size = g.size();
+        let flat: Vec<f32> =
+            Vec::<f32>::try_from(g.detach().to_device(tch::Device::Cpu).reshape([-1]))
+                .unwrap_or_default();
+        let per = (size[1] * 3) as usize;
+        let mut out: Vec<f32> = Vec::with_capacity(flat.len());
+        for garment in flat.chunks_exact(per) {
+            let mut points: Vec<[f32; 3]> = garment
+                .chunks_exact(3)
+                .map(|c| [c[0], c[1], c[2]])
+                .collect();
+            limit.project(&mut points, *band, *iterations);
+            out.extend(points.iter().flatten());
+        }
+        Tensor::from_slice(&out)
+            .reshape(size.as_slice())
+            .to_device(g.device())
+            - g.detach()
+    });
+    g + moved
 }
 
 /// RMS vertex distance (mm) of roll-outs over fixed windows: `windows` evenly spaced starts,
 /// `k` frames each, no noise (before and after the fit, on the same windows).
-fn measure(model: &Played, starts: &[usize], windows: usize, k: usize) -> f64 {
+fn measure(model: &Played, starts: &[Window], windows: usize, k: usize) -> f64 {
     let step = (starts.len() / windows.max(1)).max(1);
-    let t0: Vec<i64> = starts
-        .iter()
-        .step_by(step)
-        .take(windows)
-        .map(|&t| t as i64)
-        .collect();
+    let t0: Vec<Window> = starts.iter().step_by(step).take(windows).copied().collect();
     let mut sum = 0.0;
     for chunk in t0.chunks(8) {
         let (pos, _) = tch::no_grad(|| unroll_loss(model, chunk, k, None));

@@ -261,6 +261,57 @@ pub fn motion_model(
     (out, report)
 }
 
+/// The learnt latent dynamics (issue 37): fitted through roll-outs of the training frames, the
+/// model plays them closer to the simulation than its linear base alone (the same model trained
+/// without them: the same seed gives the same linear path). Seen failing with
+/// `MotionEncoder::integrate` leaving the learnt term out (both play alike).
+#[test]
+fn learnt_dynamics_play_closer_than_their_linear_base() {
+    let dir = out_dir("dyn_learned");
+    let sim = short_sim(&dir);
+    // A strong ridge keeps the linear fit from interpolating the five frames exactly.
+    let (linear, _) = motion_model(&dir, &sim, "linear.safetensors", &["--ridge", "1"]);
+    let (learned, report) = motion_model(
+        &dir,
+        &sim,
+        "learned.safetensors",
+        &["--ridge", "1", "--dynamics-epochs", "30", "--unroll-frames", "2,3"],
+    );
+    let fit = &report["dynamics"];
+    let (base, fitted) = (
+        fit["base_rms_mm"].as_f64().unwrap(),
+        fit["fitted_rms_mm"].as_f64().unwrap(),
+    );
+    eprintln!("training windows rolled out: {base:.3} mm linear, {fitted:.3} mm learnt");
+    assert!(fitted < 0.7 * base, "{fit}");
+    // Played by `rollout` from the simulation's first frame, no collision fix.
+    let truth = garmentbake::io::point_cache::read_pc2(&sim, 2808).unwrap();
+    let error = |model: &Path, name: &str| {
+        let out = dir.join(name);
+        roll_out(model, &sim, &out, &["--no-collision-fix"]);
+        let frames = garmentbake::io::point_cache::read_pc2(&out, 2808).unwrap();
+        let per_frame: Vec<f64> = (1..frames.len())
+            .map(|f| {
+                let d: f64 = frames[f]
+                    .iter()
+                    .zip(&truth[f])
+                    .map(|(a, b)| {
+                        (0..3)
+                            .map(|i| ((a[i] - b[i]) as f64).powi(2))
+                            .sum::<f64>()
+                            .sqrt()
+                    })
+                    .sum();
+                d / 2808.0 * 1e3
+            })
+            .collect();
+        per_frame.iter().sum::<f64>() / per_frame.len() as f64
+    };
+    let (l, d) = (error(&linear, "linear.pc2"), error(&learned, "learned.pc2"));
+    eprintln!("131_01 rolled out over frames 1-5: {l:.3} mm linear, {d:.3} mm learnt");
+    assert!(d < 0.7 * l, "learnt {d:.3} mm, linear {l:.3} mm");
+}
+
 /// `rollout` of 131_01 with `model` from `init`, written to `out`.
 fn rollout_of_131_01<'a>(model: &'a str, init: &'a str, out: &'a str) -> Vec<&'a str> {
     vec![

@@ -150,6 +150,13 @@ pub struct DynamicsSettings {
     /// Weight of the velocity term beside the position term.
     pub velocity_weight: f64,
     pub seed: u64,
+    /// The roll-out's strain limit, applied to each decoded frame before it is fed forward as
+    /// `rollout` does (band, Gauss–Seidel sweeps; 0 sweeps: none): the fit then sees the states
+    /// the model meets at play time.
+    #[serde(default)]
+    pub strain_band: f32,
+    #[serde(default)]
+    pub strain_iterations: usize,
 }
 
 impl Default for DynamicsSettings {
@@ -164,6 +171,8 @@ impl Default for DynamicsSettings {
             noise: 0.05,
             velocity_weight: 1.0,
             seed: 0,
+            strain_band: 0.0,
+            strain_iterations: 0,
         }
     }
 }

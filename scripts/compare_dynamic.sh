@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# The dynamic skirt against three perturbed simulations of a validation clip (issue 37's
+# yardstick, docs/dynamic.md): each MODEL rolled out from the first simulated frame, then
+# `garmentbake compare` with PBNS as the quasi-static baseline (own error b, e(k) restarted from
+# the runs, the hem's swing beyond PBNS, strain, inside). The simulations and PBNS caches come
+# from scripts/dynamic_set.sh and `eval` of the PBNS skirt (docs/pbns.md's recipe).
+#
+#   bash scripts/compare_dynamic.sh CLIP OUT_PREFIX NAME=MODEL.safetensors [NAME=MODEL ...]
+#   e.g. bash scripts/compare_dynamic.sh 002_04 runs/cmp_002_04 linear=runs/dyn/linear.safetensors
+#
+# CLIP is 131_02 (samples/motions) or a take of ../shared/data/mocap/cc_base; runs are read from
+# runs/dynamic_set/CLIP_skirt_sim_p{0,1,2}.pc2 and PBNS from runs/dynamic_set/CLIP_pbns.pc2.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+CLIP=$1 OUT=$2
+shift 2
+GB=${GB:-target/debug/garmentbake}
+D=${DIR:-runs/dynamic_set}
+case $CLIP in
+131_*) BVH=samples/motions/$CLIP.bvh ;;
+*) BVH=../shared/data/mocap/cc_base/$CLIP.bvh ;;
+esac
+ARGS=()
+for spec in "$@"; do
+    name=${spec%%=*} model=${spec#*=}
+    "$GB" rollout --model "$model" --motion "$BVH" --init "$D/${CLIP}_skirt_sim_p0.pc2" \
+        --out "${OUT}_$name.pc2" --quiet > "${OUT}_$name.txt"
+    ARGS+=(--cache "$name=${OUT}_$name.pc2" --model "$name=$model")
+done
+"$GB" compare --body samples/body.glb --garment samples/garments/skirt.obj --motion "$BVH" --fps 30 \
+    --sim "$D/${CLIP}_skirt_sim_p0.pc2" --sim "$D/${CLIP}_skirt_sim_p1.pc2" --sim "$D/${CLIP}_skirt_sim_p2.pc2" \
+    "${ARGS[@]}" --cache "pbns=$D/${CLIP}_pbns.pc2" --baseline pbns \
+    --plot-horizon "${OUT}_horizon.png" --plot-hem "${OUT}_hem.png" --json > "$OUT.json"
+python3 - "$OUT.json" <<'PY'
+import json, sys
+d = json.load(open(sys.argv[1]))
+s = d["spread"]["sigma_mm"]
+print(f"{sys.argv[1]}: {d['frames']} frames, runs' spread sigma {s['clip']:.1f} mm (first 50: {s['first_50']:.1f}); hem ceiling {d['hem']['mutual_correlation']:.2f}")
+print(f"{'cache':10} {'b clip':>7} {'b 50':>6} {'e1':>6} {'e10':>6} {'e25':>6} {'e50':>6} {'hem r':>6} {'amp':>5} {'strain':>7} {'p99':>6} {'inside':>7}")
+for c in d["caches"]:
+    own, hz, hem, p = c["score"]["own_mm"], c["horizon_mm"] or [], c["hem"], c["plausibility"]
+    e = [f"{hz[k - 1]:6.1f}" if len(hz) >= k else "     -" for k in (1, 10, 25, 50)]
+    r = hem["correlation_with_each"]
+    print(f"{c['name']:10} {own['clip']:7.1f} {own['first_50']:6.1f} {' '.join(e)} {r if r is None else round(r, 2)!s:>6} {hem['amplitude_ratio']:5.2f} {p['strain_mean_pct']:6.1f}% {p['strain_p99_pct']:5.0f}% {c['inside_pct']:6.3f}%")
+PY
