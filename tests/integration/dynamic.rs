@@ -275,7 +275,14 @@ fn learnt_dynamics_play_closer_than_their_linear_base() {
         &dir,
         &sim,
         "learned.safetensors",
-        &["--ridge", "1", "--dynamics-epochs", "30", "--unroll-frames", "2,3"],
+        &[
+            "--ridge",
+            "1",
+            "--dynamics-epochs",
+            "30",
+            "--unroll-frames",
+            "2,3",
+        ],
     );
     let fit = &report["dynamics"];
     let (base, fitted) = (
