@@ -547,15 +547,29 @@ fn bad_outputs_are_refused_with_one_line() {
     assert_eq!(out.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("no folder"), "{stderr}");
     assert!(!missing.parent().unwrap().exists());
-    // A failure inside usd-core (a folder in the way of the file): one line with its reason.
+    // A folder in the way of the file: one line naming it, the folder untouched, and nothing
+    // else left beside it (usd-core writes into a staging folder whose name holds the process
+    // id, so a failure inside usd-core itself can no longer be provoked from outside).
     let blocked = dir.join("blocked.usdc");
-    std::fs::create_dir_all(blocked.with_file_name(".blocked.partial.usdc")).unwrap();
+    std::fs::create_dir_all(blocked.join("keep")).unwrap();
     let out = pose_to(&blocked);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{stderr}");
     assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
-    assert!(stderr.contains("usd-core"), "{stderr}");
-    assert!(!blocked.exists());
+    assert!(stderr.contains("blocked.usdc"), "{stderr}");
+    assert!(
+        blocked.join("keep").is_dir(),
+        "the folder in the way is left as it was"
+    );
+    let left: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(
+        left,
+        vec![std::ffi::OsString::from("blocked.usdc")],
+        "nothing else written"
+    );
 }
 
 #[test]
