@@ -170,14 +170,10 @@ impl StaticInputs {
     /// `(Z_{t−1}, [Z^ball_t, Z^stay_t])` by the space's linear path alone: all of them when the
     /// space's networks are idle ([`Space::networks_idle`]).
     pub fn linear(space: &Space, h: &History) -> (Tensor, Tensor) {
-        tch::no_grad(|| Self::linear_tracked(space, h))
-    }
-
-    /// [`StaticInputs::linear`] with gradients flowing from the history's garments (training
-    /// through the model's own roll-outs, `train::unroll`).
-    pub fn linear_tracked(space: &Space, h: &History) -> (Tensor, Tensor) {
-        let (g, _, m) = Self::stacked(h);
-        Self::split(&space.linear_latent(&g, &m), h.garment[0].size()[0])
+        tch::no_grad(|| {
+            let (g, _, m) = Self::stacked(h);
+            Self::split(&space.linear_latent(&g, &m), h.garment[0].size()[0])
+        })
     }
 
     /// The three garments to encode (`g_{t−1}` against the body at `t − 1`; the ballistic
