@@ -16,6 +16,9 @@ pub fn set_quiet(quiet: bool) {
 
 /// Plain lines: the first no sooner than this after the start (short work stays silent) ...
 const FIRST_AFTER: Duration = Duration::from_secs(1);
+/// ... unless this variable says otherwise (seconds; 0 logs from the first tenth, e.g. for a farm
+/// that wants every job's lines whatever its length, or a test that must not depend on speed).
+const FIRST_AFTER_VAR: &str = "GARMENTBAKE_PROGRESS_AFTER_S";
 /// ... then one per tenth of the work, and one at least this often when the work is slow.
 const AT_LEAST_EVERY: Duration = Duration::from_secs(30);
 
@@ -28,7 +31,7 @@ pub fn bar(len: u64, what: &str, hide_bar: bool) -> Progress {
     } else if !std::io::stderr().is_terminal() {
         (
             indicatif::ProgressBar::hidden(),
-            Some(Mutex::new(Plain::new(what, len, Instant::now()))),
+            Some(Mutex::new(Plain::new(what, len, Instant::now(), first_after()))),
         )
     } else if hide_bar {
         (indicatif::ProgressBar::hidden(), None)
@@ -102,6 +105,15 @@ impl Progress {
     }
 }
 
+/// The quiet start of plain lines: `GARMENTBAKE_PROGRESS_AFTER_S` when it holds a number of seconds.
+fn first_after() -> Duration {
+    std::env::var(FIRST_AFTER_VAR)
+        .ok()
+        .and_then(|v| v.trim().parse::<f64>().ok())
+        .filter(|s| s.is_finite() && *s >= 0.0)
+        .map_or(FIRST_AFTER, Duration::from_secs_f64)
+}
+
 /// The state behind plain progress lines.
 struct Plain {
     what: String,
@@ -109,29 +121,31 @@ struct Plain {
     position: u64,
     message: Option<String>,
     started: Instant,
+    first_after: Duration,
     /// When the last line was printed, and the tenth of the work it reported.
     last_line: Option<Instant>,
     last_tenth: u64,
 }
 
 impl Plain {
-    fn new(what: &str, len: u64, now: Instant) -> Plain {
+    fn new(what: &str, len: u64, now: Instant, first_after: Duration) -> Plain {
         Plain {
             what: what.to_string(),
             len,
             position: 0,
             message: None,
             started: now,
+            first_after,
             last_line: None,
             last_tenth: 0,
         }
     }
 
     /// The line to print at `now`, if one is due: the work reached a new tenth, or the last line
-    /// is 30 s old; never in the first second.
+    /// is 30 s old; never in the first second (or `first_after`).
     fn due(&mut self, now: Instant) -> Option<String> {
         let elapsed = now.duration_since(self.started);
-        if elapsed < FIRST_AFTER {
+        if elapsed < self.first_after {
             return None;
         }
         let tenth = (self.position.min(self.len) * 10)
@@ -181,7 +195,7 @@ mod tests {
     /// The lines a run of `len` steps prints when step k ends at `times[k]` seconds.
     fn lines(len: u64, times: &[f64]) -> Vec<String> {
         let start = Instant::now();
-        let mut p = Plain::new("epochs", len, start);
+        let mut p = Plain::new("epochs", len, start, FIRST_AFTER);
         times
             .iter()
             .filter_map(|&t| {
@@ -230,7 +244,7 @@ mod tests {
     #[test]
     fn unknown_length_counts_and_messages_follow() {
         let start = Instant::now();
-        let mut p = Plain::new("simulate", 0, start);
+        let mut p = Plain::new("simulate", 0, start, FIRST_AFTER);
         p.position = 7;
         assert_eq!(
             p.due(start + Duration::from_secs(5)),
