@@ -186,4 +186,36 @@ impl ClipCoverage {
             .filter(|f| self.beyond.binary_search(f).is_err())
             .collect()
     }
+
+    /// What `eval` and `bake` report per clip: the coverage of its frames (`clip`: the clip
+    /// played on the model's skeleton) and the [`FARTHEST`] frames farthest from the training
+    /// poses, farthest first.
+    pub fn of_clip(
+        coverage: &Coverage,
+        joints: &[usize],
+        clip: &crate::rig::SkelAnimation,
+    ) -> (ClipCoverage, Vec<usize>) {
+        let poses: Vec<_> = (0..clip.frame_count())
+            .map(|f| clip.local_pose(f))
+            .collect();
+        let coverage = ClipCoverage::of(coverage, joints, &poses);
+        let farthest = coverage.farthest(FARTHEST);
+        (coverage, farthest)
+    }
+
+    /// One line on the clip's coverage (`eval` and `bake` print the same).
+    pub fn line(&self, farthest: &[usize]) -> String {
+        format!(
+            "pose distance to the training poses: median {:.3}, max {:.3} rad; {} of {} frames beyond the trained range (≥ {:.3} rad); farthest frames {farthest:?}",
+            self.median,
+            self.max,
+            self.beyond.len(),
+            self.distance.len(),
+            self.threshold,
+        )
+    }
 }
+
+/// How many of a clip's frames farthest from the training poses `eval` and `bake` name: the
+/// ones to look at before shipping.
+pub const FARTHEST: usize = 8;

@@ -1,5 +1,5 @@
 //! `FABRIC.toml`: the physical parameters of the garment (training potential, metrics), the shipped presets
-//! (`samples/fabrics/*.toml`, also usable by name: `--config denim`).
+//! (`samples/fabrics/*.toml`, also usable by name: `--fabric denim`).
 //!
 //! ```toml
 //! name = "cotton"
@@ -22,7 +22,7 @@ use std::path::Path;
 /// Standard gravity, m/s² (the potential's gravity term and the metrics' energy).
 pub const GRAVITY: f32 = 9.81;
 
-/// Presets compiled in, so `--config NAME` works anywhere.
+/// Presets compiled in, so `--fabric NAME` works anywhere.
 pub const PRESETS: [(&str, &str); 4] = [
     ("cotton", include_str!("../samples/fabrics/cotton.toml")),
     ("silk", include_str!("../samples/fabrics/silk.toml")),
@@ -185,7 +185,7 @@ impl Fabric {
         } else {
             let names: Vec<&str> = PRESETS.iter().map(|p| p.0).collect();
             bail!(
-                "--config {spec}: no such file, and not a preset (presets: {})",
+                "--fabric {spec}: no such file, and not a preset (presets: {})",
                 names.join(", ")
             );
         };

@@ -16,8 +16,10 @@
 //! 9. `bake`, `compare` — model output → the exporter-neutral baked asset (`exporters::asset`);
 //!    caches against perturbed simulations (spread, own error, e(k), the hem's swing)
 //! 10. `validate` — files checked: structure, and replay against the model
-//! 11. `batch` — manifests expanded into keyed jobs (command lines), run here or on Ray
-//! 12. `cli` — one command per pipeline step
+//! 11. `pipeline` — the steps behind commands that gather several layers' work (preview's
+//!     sheet, view's page)
+//! 12. `batch` — manifests expanded into keyed jobs (command lines), run here or on Ray
+//! 13. `cli` — one command per pipeline step: flags, a call into the library, the report
 
 pub mod bake;
 pub mod batch;
@@ -35,6 +37,7 @@ pub mod io;
 pub mod metrics;
 pub mod models;
 pub mod motion;
+pub mod pipeline;
 pub mod preview;
 pub mod progress;
 pub mod rig;

@@ -5,6 +5,7 @@
 //! stderr), its own memory and thread pools (libtorch's are per process), can be killed alone,
 //! and a crash stays inside it; the same command line runs unchanged on a Ray node or a farm.
 
+pub mod engine;
 pub mod ledger;
 pub mod manifest;
 pub mod plan;

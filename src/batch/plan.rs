@@ -604,6 +604,53 @@ fn dynamic_jobs(b: &mut Builder, r: &Resolved, g: &Garment) -> Result<()> {
     Ok(())
 }
 
+impl Plan {
+    /// How many jobs of each kind, kinds in the order they first come.
+    pub fn kinds(&self) -> Vec<(&str, usize)> {
+        let mut kinds: Vec<(&str, usize)> = vec![];
+        for j in &self.jobs {
+            match kinds.iter_mut().find(|(k, _)| *k == j.kind) {
+                Some((_, n)) => *n += 1,
+                None => kinds.push((&j.kind, 1)),
+            }
+        }
+        kinds
+    }
+}
+
+/// The plan of the manifest at `manifest`, its outputs in `out` (default: the manifest's
+/// `out`), which is created if missing (noted in `ledger`).
+pub fn from_manifest(
+    manifest: &Path,
+    out: Option<&Path>,
+    ledger: &super::ledger::Ledger,
+) -> Result<Plan> {
+    let resolved = super::manifest::read(manifest)?;
+    let out = match (out, &resolved.manifest.out) {
+        (Some(o), _) => o.to_path_buf(),
+        (None, Some(o)) => o.clone(),
+        (None, None) => bail!("{}: no `out` folder; give --out", manifest.display()),
+    };
+    ledger
+        .create_dir_all(&out)
+        .with_context(|| format!("cannot create {}", out.display()))?;
+    let out = out
+        .canonicalize()
+        .with_context(|| format!("cannot read {}", out.display()))?;
+    plan(&resolved, &out)
+}
+
+/// Job `id` of the plan saved at `path` (by `batch plan --json` or `batch run`).
+pub fn saved_job(path: &Path, id: &str) -> Result<Job> {
+    let text = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let plan: Plan = serde_json::from_slice(&text)
+        .with_context(|| format!("{} is not a batch plan", path.display()))?;
+    plan.jobs
+        .into_iter()
+        .find(|x| x.id == id)
+        .with_context(|| format!("{}: no job '{id}'", path.display()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

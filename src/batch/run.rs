@@ -26,6 +26,16 @@ pub enum Status {
 }
 
 impl Status {
+    /// The status in a summary line: a failure stands out.
+    pub fn word(self) -> &'static str {
+        match self {
+            Status::Ran => "ran",
+            Status::UpToDate => "up to date",
+            Status::Failed => "FAILED",
+            Status::Skipped => "skipped",
+        }
+    }
+
     pub fn ok(self) -> bool {
         matches!(self, Status::Ran | Status::UpToDate)
     }
@@ -62,6 +72,33 @@ impl Outcome {
         }
     }
 
+    /// The job's line in a summary: status, time, key figures, outputs (relative to `out`), and
+    /// the error on a line of its own.
+    pub fn line(&self, out: &Path) -> String {
+        let figures: Vec<String> = self
+            .metrics
+            .iter()
+            .map(|(k, v)| format!("{k} {v:.3}"))
+            .collect();
+        let files: Vec<String> = self
+            .outputs
+            .iter()
+            .map(|p| p.strip_prefix(out).unwrap_or(p).display().to_string())
+            .collect();
+        let mut s = format!(
+            "{:<44} {:<10} {:>7.1} s  {:<34} {}",
+            self.id,
+            self.status.word(),
+            self.seconds,
+            figures.join(", "),
+            files.join(" ")
+        );
+        if let Some(e) = &self.error {
+            s.push_str(&format!("\n    {e}"));
+        }
+        s
+    }
+
     /// A job not run because `upstream` did not succeed.
     pub fn skipped(job: &Job, upstream: &str) -> Outcome {
         Outcome {
@@ -79,7 +116,7 @@ pub fn key_path(path: &Path) -> PathBuf {
 }
 
 /// Reads a job's `--json` report into its key figures, given the job's kind: through the
-/// commands' own report types, which live above this layer (the CLI passes `cli::batch::figures`).
+/// commands' own report types, which live above this layer (the CLI passes `cli::figures`).
 pub type Figures = dyn Fn(&str, &[u8]) -> Result<BTreeMap<String, f64>> + Sync;
 
 /// Every output (and the report) is there and carries the job's key.

@@ -3,7 +3,7 @@
 
 use crate::models::file::ModelFile;
 use crate::train::pbns::{set_training_threads, InputFiles, Inputs, RefreshMode, Settings};
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use std::path::{Path, PathBuf};
 
 /// How a number flag is checked while the command line is parsed: NaN and infinities are never
@@ -68,6 +68,7 @@ where
 
 /// The motion-capture clips a command reads, and how.
 #[derive(clap::Args)]
+#[command(next_help_heading = "Inputs")]
 pub struct ClipArgs {
     /// BVH clip(s); repeat --motion for several.
     #[arg(long = "motion", required = true)]
@@ -136,6 +137,7 @@ impl ClipArgs {
 
 /// Where the tensors run.
 #[derive(clap::Args)]
+#[command(next_help_heading = "Advanced")]
 pub struct ComputeArgs {
     /// cpu, cuda or cuda:N.
     #[arg(long, default_value = "cpu")]
@@ -161,6 +163,7 @@ impl ComputeArgs {
 
 /// `--json`: print the command's report as one JSON object on stdout instead of text.
 #[derive(clap::Args)]
+#[command(next_help_heading = "Outputs")]
 pub struct OutputArgs {
     /// Print the report as JSON on stdout instead of text (no progress bars, no warnings).
     #[arg(long)]
@@ -171,6 +174,7 @@ pub struct OutputArgs {
 /// `train-dynamic`'s rounds, whose fix is on with --rollout-fix): the decoded garment's edges
 /// pulled back towards their rest lengths, and a garment that crosses the body pushed out.
 #[derive(clap::Args)]
+#[command(next_help_heading = "Advanced")]
 pub struct CollisionFixArgs {
     /// How the collision fix resolves a frame: `projection` pushes the crossing vertices out and
     /// keeps the edges around them (plain arrays, ~1 ms a frame); `paper` is the paper's Adam
@@ -228,44 +232,50 @@ pub const TRAIN_DEFAULTS: Settings = Settings::DEFAULT;
 #[derive(clap::Args)]
 pub struct TrainInputs {
     /// Skinned body (glTF/glb); metres, Y-up.
-    #[arg(long)]
+    #[arg(long, help_heading = "Inputs")]
     pub body: PathBuf,
     /// Garment mesh in the body's rest pose: OBJ, or USD with one Mesh prim (.usd/.usda/.usdc/.usdz,
     /// converted to metres, Y-up); sidecar NAME.toml: pinned vertices.
-    #[arg(long)]
+    #[arg(long, help_heading = "Inputs")]
     pub garment: PathBuf,
     /// The training clips (BVH): the poses come from them.
     #[command(flatten)]
     pub clips: ClipArgs,
     /// Fabric: a FABRIC.toml or a preset name (cotton, silk, denim, jersey).
-    #[arg(long, default_value = "cotton")]
+    #[arg(
+        long = "fabric",
+        alias = "config",
+        value_name = "FABRIC",
+        default_value = "cotton",
+        help_heading = "Inputs"
+    )]
     pub config: String,
     /// Seed: same seed and inputs → byte-identical model.
-    #[arg(long, default_value_t = TRAIN_DEFAULTS.seed)]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.seed, help_heading = "Training")]
     pub seed: u64,
     #[command(flatten)]
     pub compute: ComputeArgs,
     /// Poses per optimisation step.
-    #[arg(long, default_value_t = TRAIN_DEFAULTS.batch)]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.batch, help_heading = "Training")]
     pub batch: usize,
     /// Initial Adam learning rate (cosine decay to a tenth).
-    #[arg(long, default_value_t = TRAIN_DEFAULTS.learning_rate, value_parser = positive::<f64>())]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.learning_rate, value_parser = positive::<f64>(), help_heading = "Training")]
     pub lr: f64,
     /// MLP width = number of PSD blend shapes.
-    #[arg(long, default_value_t = TRAIN_DEFAULTS.width)]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.width, help_heading = "Training")]
     pub width: usize,
     /// Skin influences per vertex (4 or 8), fixed at initialisation.
-    #[arg(long, default_value_t = TRAIN_DEFAULTS.influences)]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.influences, help_heading = "Training")]
     pub influences: usize,
     /// Keep the proximity blend weights instead of optimising them.
-    #[arg(long)]
+    #[arg(long, help_heading = "Training")]
     pub fixed_weights: bool,
     /// Pose balancing threshold (radians, per rotation component of the garment's joints).
-    #[arg(long, default_value_t = TRAIN_DEFAULTS.pose_threshold, value_parser = non_negative::<f32>())]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.pose_threshold, value_parser = non_negative::<f32>(), help_heading = "Training")]
     pub pose_threshold: f32,
     /// Extra training poses per balanced one, each taking every limb chain (legs, spine, neck and
     /// head, arms) from a different real frame: covers pose combinations the clips lack.
-    #[arg(long, default_value_t = TRAIN_DEFAULTS.recombine)]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.recombine, help_heading = "Training")]
     pub recombine: usize,
     /// Pose coverage: generated training poses per balanced real one (0 turns it off). Half
     /// recombine limb chains of real frames (bent up to 30 % further), half draw about half of the
@@ -276,31 +286,32 @@ pub struct TrainInputs {
         long,
         default_value_t = TRAIN_DEFAULTS.coverage,
         value_name = "PER_REAL_POSE",
-        value_parser = non_negative::<f32>()
+        value_parser = non_negative::<f32>(),
+        help_heading = "Training"
     )]
     pub coverage: f32,
     /// Epochs between refreshes of the nearest-body-vertex candidates.
-    #[arg(long, default_value_t = TRAIN_DEFAULTS.refresh_every)]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.refresh_every, help_heading = "Advanced")]
     pub refresh_every: usize,
     /// How candidates are refreshed: trees (CPU k-d trees on a worker thread), device (brute
     /// force with cdist + topk on the training device), auto (device on CUDA, else trees).
-    #[arg(long, value_enum, default_value = "auto")]
+    #[arg(long, value_enum, default_value = "auto", help_heading = "Advanced")]
     pub refresh: RefreshArg,
     /// Candidate body vertices kept per garment vertex.
-    #[arg(long, default_value_t = TRAIN_DEFAULTS.candidates)]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.candidates, help_heading = "Advanced")]
     pub candidates: usize,
     /// Learning rate of the blend-weight logits relative to --lr.
-    #[arg(long, default_value_t = TRAIN_DEFAULTS.weights_lr_scale, value_parser = non_negative::<f64>())]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.weights_lr_scale, value_parser = non_negative::<f64>(), help_heading = "Training")]
     pub weights_lr_scale: f64,
     /// Initial blend weights: copy the body's within this distance (metres) of it at rest and
     /// interpolate them smoothly over the garment beyond (a skirt's hanging part).
-    #[arg(long, default_value_t = TRAIN_DEFAULTS.inpaint_beyond.unwrap(), value_parser = non_negative::<f32>())]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.inpaint_beyond.unwrap(), value_parser = non_negative::<f32>(), help_heading = "Training")]
     pub inpaint_beyond: f32,
     /// Copy the body's weights by proximity everywhere (no inpainting).
-    #[arg(long)]
+    #[arg(long, help_heading = "Training")]
     pub no_inpaint: bool,
     /// Epochs between validation passes (exact metrics on the held-out poses).
-    #[arg(long, default_value_t = TRAIN_DEFAULTS.validate_every)]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.validate_every, help_heading = "Advanced")]
     pub validate_every: usize,
 }
 
@@ -415,41 +426,4 @@ pub fn output_set(
         })
         .collect();
     Ok(exporters::atomic::OutputSet::check(&planned)?)
-}
-
-/// A per-frame point cache of `mesh`'s vertices, in the format the extension names.
-pub fn write_cache(
-    path: &Path,
-    mesh: &crate::geometry::TriMesh,
-    frames: &[Vec<[f32; 3]>],
-    fps: f32,
-) -> Result<()> {
-    let name = path
-        .file_stem()
-        .map_or("cache".into(), |s| s.to_string_lossy().into_owned());
-    write_caches(path, &[(&name, mesh, frames)], fps)
-}
-
-/// A named mesh and its frames, one entry of [`write_caches`].
-pub type NamedFrames<'a> = (&'a str, &'a crate::geometry::TriMesh, &'a [Vec<[f32; 3]>]);
-
-/// Several meshes' frames of one shot (a garment and the body it moves on), each named, in one
-/// file: a USD stage (one mesh: any point-cache format).
-pub fn write_caches(path: &Path, meshes: &[NamedFrames], fps: f32) -> Result<()> {
-    let caches: Vec<exporters::PointCache> = meshes
-        .iter()
-        .map(|&(name, mesh, frames)| exporters::PointCache {
-            name: name.into(),
-            fps,
-            triangles: mesh.triangles.clone(),
-            uvs: None,
-            point_count: mesh.vertex_count(),
-            points: frames.iter().flatten().copied().collect(),
-        })
-        .collect();
-    match caches.as_slice() {
-        [one] => exporters::write_point_cache(one, path),
-        all => exporters::write_point_caches(all, path),
-    }
-    .with_context(|| format!("writing {}", path.display()))
 }

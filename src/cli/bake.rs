@@ -26,32 +26,32 @@ use std::path::PathBuf;
 #[derive(clap::Args)]
 pub struct Args {
     /// Trained model (.safetensors from `garmentbake train`).
-    #[arg(long)]
+    #[arg(long, help_heading = "Inputs")]
     pub model: PathBuf,
     #[command(flatten)]
     pub clips: ClipArgs,
     /// Output: .glb / .gltf (glTF 2.0) or .usda / .usdc / .usdz (UsdSkel).
-    #[arg(long)]
+    #[arg(long, help_heading = "Outputs")]
     pub out: PathBuf,
     /// Number of blend shapes to keep (8 is what every glTF client must support).
-    #[arg(long, conflicts_with = "tolerance_mm")]
+    #[arg(long, conflicts_with = "tolerance_mm", help_heading = "Outputs")]
     pub max_targets: Option<usize>,
     /// Keep the fewest blend shapes whose max offset error over the clips is within this (mm).
-    #[arg(long, value_parser = super::args::positive::<f32>())]
+    #[arg(long, value_parser = super::args::positive::<f32>(), help_heading = "Outputs")]
     pub tolerance_mm: Option<f32>,
     /// Joint influences per vertex in the file (default: the model's own, which loses nothing).
-    #[arg(long)]
+    #[arg(long, help_heading = "Outputs")]
     pub influences: Option<usize>,
     /// Add the body mesh on the same skeleton.
-    #[arg(long)]
+    #[arg(long, help_heading = "Outputs")]
     pub with_body: bool,
     /// Check what was written as `garmentbake validate` does: its structure, and its replay
     /// (glTF: as the spec evaluates it; USD: through UsdSkel) against the network on every clip
     /// within --tolerance-mm (default 1 mm); exit 1 when it fails.
-    #[arg(long)]
+    #[arg(long, help_heading = "Outputs")]
     pub validate: bool,
     /// Also write a page that plays the bake in a browser (as `garmentbake view FILE.glb --out`).
-    #[arg(long, value_name = "PAGE.html")]
+    #[arg(long, value_name = "PAGE.html", help_heading = "Outputs")]
     pub view: Option<PathBuf>,
     #[command(flatten)]
     pub compute: ComputeArgs,
@@ -81,13 +81,10 @@ impl ClipCoverageLine {
         Ok(clips
             .iter()
             .map(|clip| {
-                let poses: Vec<_> = (0..clip.frame_count())
-                    .map(|f| clip.local_pose(f))
-                    .collect();
-                let coverage = ClipCoverage::of(c, joints, &poses);
+                let (coverage, farthest) = ClipCoverage::of_clip(c, joints, clip);
                 ClipCoverageLine {
                     clip: clip.name.clone(),
-                    farthest: coverage.farthest(8),
+                    farthest,
                     coverage,
                 }
             })
@@ -184,7 +181,8 @@ impl Execute for Args {
                     exporters::gltf::to_glb(&asset)
                 };
                 let title = self.out.file_name().unwrap_or_default().to_string_lossy();
-                let bytes = outputs.write(page, |p| super::view::glb_page(p, &glb, &title))?;
+                let bytes =
+                    outputs.write(page, |p| crate::pipeline::view::glb_page(p, &glb, &title))?;
                 Some((page.clone(), bytes))
             }
             None => None,
@@ -223,9 +221,7 @@ impl Execute for Args {
             );
         }
         for c in &r.coverage {
-            let frames = c.coverage.distance.len();
-            let line = super::eval::coverage_line(&c.coverage, frames, &c.farthest);
-            println!("{}: {line}", c.clip);
+            println!("{}: {}", c.clip, c.coverage.line(&c.farthest));
         }
         if r.coverage.is_empty() {
             println!("coverage: this model has no training poses stored (trained before the coverage report)");

@@ -3,12 +3,12 @@
 //! same frames, in the same run.
 
 use super::args::{CollisionFixArgs, ComputeArgs, OutputArgs, TrainInputs};
-use super::rollout::{timing, Timing};
 use super::Execute;
 use crate::fabric::Fabric;
 use crate::garment::Garment;
 use crate::io::gltf_body::read_body;
 use crate::motion::{load_clip, read_maps};
+use crate::rollout::timing::Timing;
 use crate::rollout::{for_model, Init};
 use crate::simulate::{self, Scene};
 use crate::train::pbns::{RefreshMode, StepBench, Trainer};
@@ -53,7 +53,13 @@ struct RolloutBench {
     #[arg(long = "map")]
     maps: Vec<PathBuf>,
     /// Fabric preset or FABRIC.toml for the simulation.
-    #[arg(long, default_value = "cotton")]
+    #[arg(
+        long = "fabric",
+        alias = "config",
+        value_name = "FABRIC",
+        default_value = "cotton",
+        help_heading = "Inputs"
+    )]
     config: String,
     /// Frames of the clip, from its start.
     #[arg(long, default_value_t = 60)]
@@ -151,7 +157,7 @@ impl RolloutBench {
                 bar.set_position(f as u64 + 1)
             })?;
             bar.finish_and_clear();
-            Ok(timing(&r.timings))
+            Ok(Timing::of(&r.timings))
         };
         say(&format!("rolling out {} frames at {fps} fps", poses.len()));
         let plain = roll(false)?;

@@ -1,10 +1,10 @@
 //! `garmentbake eval`: a trained model over a clip → point cache + PBNS metrics.
 
-use super::args::write_cache;
 use super::args::{ClipArgs, ComputeArgs, OutputArgs};
 use super::Execute;
 use crate::eval::{compare_frames, lbs_frames, model_frames, ClipCoverage, Comparison};
 use crate::io::gltf_body::read_body;
+use crate::io::point_cache::write_cache;
 use crate::metrics::{body_edges_under, ClothGeometry, Inside, Metrics};
 use crate::models::coverage::{Coverage, OutsideWeights};
 use crate::models::file::check_skeleton;
@@ -32,27 +32,27 @@ use std::path::PathBuf;
 #[derive(clap::Args)]
 pub struct Args {
     /// Trained model (.safetensors from `garmentbake train`).
-    #[arg(long)]
+    #[arg(long, help_heading = "Inputs")]
     pub model: PathBuf,
     /// The clip (one --motion), retargeted onto the model's skeleton.
     #[command(flatten)]
     pub clips: ClipArgs,
     /// Body to collide with (default: the one stored in the model); must have the same skeleton.
-    #[arg(long)]
+    #[arg(long, help_heading = "Inputs")]
     pub body: Option<PathBuf>,
     /// Output point cache of the garment, one sample per frame: .pc2 (start frame 0), .mdd
     /// (Lightwave's, frame times f / fps), or .usda/.usdc/.usdz (a Mesh with time-sampled points
     /// and extent).
-    #[arg(long)]
+    #[arg(long, help_heading = "Outputs")]
     pub out: PathBuf,
     /// Also write the posed body as a point cache (same formats).
-    #[arg(long)]
+    #[arg(long, help_heading = "Outputs")]
     pub body_out: Option<PathBuf>,
     /// Also write a page that plays the garment cache on the body in a browser (see `view`).
-    #[arg(long, value_name = "PAGE.html")]
+    #[arg(long, value_name = "PAGE.html", help_heading = "Outputs")]
     pub view: Option<PathBuf>,
     /// Keep each blend-shape weight within the range it took over the training poses.
-    #[arg(long)]
+    #[arg(long, help_heading = "Advanced")]
     pub clamp_weights: bool,
     #[command(flatten)]
     pub compute: ComputeArgs,
@@ -117,17 +117,6 @@ impl SeriesInside {
             lbs: c.inside[1],
         }
     }
-}
-
-/// One line on a clip's pose coverage (`eval` and `bake` print the same).
-pub fn coverage_line(k: &ClipCoverage, frames: usize, farthest: &[usize]) -> String {
-    format!(
-        "pose distance to the training poses: median {:.3}, max {:.3} rad; {} of {frames} frames beyond the trained range (≥ {:.3} rad); farthest frames {farthest:?}",
-        k.median,
-        k.max,
-        k.beyond.len(),
-        k.threshold,
-    )
 }
 
 /// A clip's pose coverage and the figures of its frames within and beyond the trained range.
@@ -218,7 +207,7 @@ impl Execute for Args {
         let view = match &self.view {
             Some(page) => {
                 let bytes = outputs.write(page, |p| {
-                    super::view::cache_page(
+                    crate::pipeline::view::cache_page(
                         p,
                         (&body, &model.garment),
                         (&anim.name, anim.fps, &poses),
@@ -232,7 +221,7 @@ impl Execute for Args {
         };
         outputs.commit()?;
         let coverage = model.coverage.as_ref().map(|c| {
-            let clip = ClipCoverage::of(c, &network.feature_joints, &poses);
+            let (clip, farthest) = ClipCoverage::of_clip(c, &network.feature_joints, anim);
             let split = |frames: Vec<usize>| {
                 (!frames.is_empty()).then(|| {
                     let picked: Vec<_> = frames.iter().map(|&f| &per_frame[f]).collect();
@@ -245,7 +234,7 @@ impl Execute for Args {
                 })
             };
             CoverageReport {
-                farthest: clip.farthest(8),
+                farthest,
                 within: split(clip.within()),
                 beyond_range: split(clip.beyond.clone()),
                 clip,
@@ -314,7 +303,7 @@ impl Execute for Args {
             o.median, o.most, o.worst_frame
         );
         match &r.coverage {
-            Some(c) => print_coverage(c, r.frames),
+            Some(c) => print_coverage(c),
             None => println!(
                 "coverage: this model has no training poses stored (trained before the coverage report)"
             ),
@@ -379,8 +368,8 @@ impl OverlapSummary {
     }
 }
 
-fn print_coverage(c: &CoverageReport, frames: usize) {
-    println!("{}", coverage_line(&c.clip, frames, &c.farthest));
+fn print_coverage(c: &CoverageReport) {
+    println!("{}", c.clip.line(&c.farthest));
     for (name, split) in [("within", &c.within), ("beyond", &c.beyond_range)] {
         if let Some(s) = split {
             println!(

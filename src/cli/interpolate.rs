@@ -1,9 +1,10 @@
 //! `garmentbake interpolate`: garments decoded along a straight line between two frames' latents.
 
-use super::args::{output_set, write_cache, ComputeArgs, OutputArgs, POINT_CACHE};
+use super::args::{output_set, ComputeArgs, OutputArgs, POINT_CACHE};
 use super::Execute;
 use crate::interpolate::between;
 use crate::io::point_cache::read_pc2;
+use crate::io::point_cache::write_cache;
 use crate::metrics::vertex_distances_mm;
 use crate::motion::{load_clip, read_maps};
 use crate::simulate::stats::{self, FrameStats, Series};

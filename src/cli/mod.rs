@@ -173,3 +173,76 @@ fn one_line(e: &anyhow::Error) -> String {
     }
     out.replace('\n', " ")
 }
+
+/// The figures a person scans `batch`'s summary for, per kind of job, read from the job's `--json`
+/// report through the command's own report type: a renamed field breaks this at compile time
+/// instead of dropping a figure from every summary.
+pub fn figures(kind: &str, report: &[u8]) -> Result<std::collections::BTreeMap<String, f64>> {
+    fn read<R: serde::de::DeserializeOwned>(report: &[u8]) -> Result<R> {
+        Ok(serde_json::from_slice(report)?)
+    }
+    let f: Vec<(&str, Option<f64>)> = match kind {
+        "train" => {
+            let r: train::Report = read(report)?;
+            let last = r.last.map(|e| e.train);
+            vec![
+                ("edge_mm", last.map(|m| m.edge_mm)),
+                ("collided_pct", last.map(|m| m.collided_pct)),
+            ]
+        }
+        "eval" => {
+            let r: eval::Report = read(report)?;
+            vec![
+                ("edge_mm", Some(r.metrics.model.edge_mm)),
+                ("inside_pct", Some(r.inside.model.inside_pct)),
+            ]
+        }
+        "bake" => {
+            let r: bake::Report = read(report)?;
+            let first = r.report.clips.first();
+            vec![
+                ("replay_mm", first.map(|c| 1e3 * c.max_error_m as f64)),
+                ("targets", Some(r.report.targets as f64)),
+            ]
+        }
+        "validate" => {
+            let r: validate::Report = read(report)?;
+            vec![("replay_mm", r.replay.map(|e| e.max_mm))]
+        }
+        "simulate" => {
+            let r: simulate::Report = read(report)?;
+            vec![("s_per_frame", Some(r.seconds_per_frame))]
+        }
+        "train-dynamic" => {
+            let r: train_dynamic::Report = read(report)?;
+            vec![("train_mm", Some(r.train.mean_mm))]
+        }
+        "rollout" => {
+            let r: rollout::Report = read(report)?;
+            vec![
+                ("inside_pct", Some(r.summary.inside.inside_pct)),
+                ("vs_sim_mm", r.reference.map(|v| v.clip_mm)),
+            ]
+        }
+        _ => vec![],
+    };
+    Ok(f.into_iter()
+        .filter_map(|(name, v)| Some((name.to_string(), v?)))
+        .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A report that is not its command's is an error naming what is missing, not a summary
+    /// line quietly short of a figure.
+    #[test]
+    fn a_report_not_of_its_command_is_an_error() {
+        let stale = br#"{"summary": {"inside_pct": 3.0}, "reference": {"clip_mm": 50.0}}"#;
+        let e = figures("rollout", stale).unwrap_err();
+        assert!(format!("{e:#}").contains("missing field"), "{e:#}");
+        assert!(figures("validate", b"[]").is_err());
+        assert!(figures("a kind with no figures", b"{}").unwrap().is_empty());
+    }
+}

@@ -19,12 +19,12 @@ use std::path::PathBuf;
 #[derive(clap::Args)]
 pub struct Args {
     /// Skinned body (glTF/glb): the mesh, its skin and skeleton.
-    #[arg(long)]
+    #[arg(long, help_heading = "Inputs")]
     pub body: PathBuf,
     #[command(flatten)]
     pub clips: ClipArgs,
     /// Output .glb (binary) or .gltf (+ .bin); .usda, .usdc or .usdz (UsdSkel, through usd-core).
-    #[arg(long)]
+    #[arg(long, help_heading = "Outputs")]
     pub out: PathBuf,
     #[command(flatten)]
     pub output: OutputArgs,

@@ -1,17 +1,18 @@
 //! `garmentbake rollout`: a dynamic model played over clips frame by frame, written as a point
 //! cache (PC2, MDD, USD) or a compressed glTF, with its errors against reference simulations.
 
-use super::args::{write_cache, write_caches, CollisionFixArgs, ComputeArgs, OutputArgs};
+use super::args::{CollisionFixArgs, ComputeArgs, OutputArgs};
 use super::Execute;
 use crate::bake::sequence::{bake_sequence, SequenceReport};
 use crate::eval::lbs_frames;
 use crate::geometry::PointIndex;
-use crate::io::point_cache::read_pc2;
+use crate::io::point_cache::{read_pc2, write_cache, write_caches};
 use crate::metrics::versus::{distances_mm, Ensemble, Simulations, Versus};
 use crate::motion::{chain, load_clip, read_maps};
 use crate::rig::weights::smooth_garment_skin;
 use crate::rig::SkelAnimation;
-use crate::rollout::{for_model, FrameTiming, Init, Settings};
+use crate::rollout::timing::Timing;
+use crate::rollout::{for_model, Init, Settings};
 use crate::simulate::stats::{self, FrameStats, Series, Summary};
 use crate::validate::{check_file, replay::Reference, Validation};
 use anyhow::{bail, Context, Result};
@@ -165,23 +166,6 @@ impl Restarts {
             each: each.into_iter().map(|(start, v, _)| (start, v)).collect(),
         }
     }
-}
-
-/// Mean milliseconds per frame of each phase.
-#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize)]
-pub struct Timing {
-    pub inputs_ms: f64,
-    pub encoder_ms: f64,
-    pub decode_ms: f64,
-    /// The strain limit after the decode (absent from reports written before it).
-    #[serde(default)]
-    pub strain_ms: f64,
-    pub collision_ms: f64,
-    /// Without the strain limit and the collision phase.
-    pub network_ms: f64,
-    /// Frames on which the collision fix ran, and its mean time per iteration.
-    pub fixed_frames: usize,
-    pub ms_per_collision_iteration: f64,
 }
 
 /// Frames per row of the stability table.
@@ -374,7 +358,7 @@ impl Execute for Args {
             Some(page) => {
                 let names: Vec<String> = clips.iter().map(|c| c.name.clone()).collect();
                 let bytes = outputs.write(page, |p| {
-                    super::view::cache_page(
+                    crate::pipeline::view::cache_page(
                         p,
                         (&file.body, &file.garment),
                         (&names.join(" + "), fps, &poses),
@@ -411,7 +395,7 @@ impl Execute for Args {
             collision_fix,
             collision_loss_before_mm: mean_mm(&rollout.collision_before),
             collision_loss_after_mm: mean_mm(&rollout.collision_after),
-            timing: timing(&rollout.timings),
+            timing: Timing::of(&rollout.timings),
             summary,
             windows: per_frame.chunks(WINDOW).map(Window::of).collect(),
             lbs_reference,
@@ -611,31 +595,6 @@ impl Args {
 
 fn mean_mm(per_frame: &[f64]) -> f64 {
     1e3 * per_frame.iter().sum::<f64>() / per_frame.len().max(1) as f64
-}
-
-pub(crate) fn timing(frames: &[FrameTiming]) -> Timing {
-    // Frame 0 is the start, not a prediction.
-    let predicted = &frames[1.min(frames.len())..];
-    let n = predicted.len().max(1) as f64;
-    let mean = |f: fn(&FrameTiming) -> f64| predicted.iter().map(f).sum::<f64>() / n;
-    let fixed: Vec<&FrameTiming> = predicted
-        .iter()
-        .filter(|t| t.collision_iterations > 0)
-        .collect();
-    let iterations: usize = fixed.iter().map(|t| t.collision_iterations).sum();
-    Timing {
-        inputs_ms: mean(|t| t.inputs_ms),
-        encoder_ms: mean(|t| t.encoder_ms),
-        decode_ms: mean(|t| t.decode_ms),
-        strain_ms: mean(|t| t.strain_ms),
-        collision_ms: mean(|t| t.collision_ms),
-        network_ms: mean(|t| t.inputs_ms + t.encoder_ms + t.decode_ms),
-        fixed_frames: fixed.len(),
-        // `+ 0.0`: an empty f64 sum is −0.0.
-        ms_per_collision_iteration: fixed.iter().map(|t| t.collision_ms).sum::<f64>()
-            / iterations.max(1) as f64
-            + 0.0,
-    }
 }
 
 /// The model rolled out for `every` frames from the reference's state at frames 0, `every`,

@@ -1,10 +1,11 @@
 //! `garmentbake simulate`: cloth-simulated ground truth of a garment on a clip (Blender).
 
-use super::args::{write_cache, ClipArgs, OutputArgs};
+use super::args::{ClipArgs, OutputArgs};
 use super::Execute;
 use crate::fabric::Fabric;
 use crate::garment::Garment;
 use crate::io::gltf_body::read_body;
+use crate::io::point_cache::write_cache;
 use crate::simulate::{self, cache, stats, Scene, Settings};
 use anyhow::{bail, Result};
 use serde::{Deserialize, Serialize};
@@ -29,52 +30,58 @@ use std::path::PathBuf;
 #[derive(clap::Args)]
 pub struct Args {
     /// Skinned body (glTF/glb); metres, Y-up.
-    #[arg(long)]
+    #[arg(long, help_heading = "Inputs")]
     pub body: PathBuf,
     /// Garment mesh in the body's rest pose (OBJ or USD) with its NAME.toml sidecar (pins).
-    #[arg(long)]
+    #[arg(long, help_heading = "Inputs")]
     pub garment: PathBuf,
     /// The clip (one --motion).
     #[command(flatten)]
     pub clips: ClipArgs,
     /// Fabric: a FABRIC.toml or a preset name (cotton, silk, denim, jersey); its [simulate]
     /// table sets Blender's cloth.
-    #[arg(long, default_value = "cotton")]
+    #[arg(
+        long = "fabric",
+        alias = "config",
+        value_name = "FABRIC",
+        default_value = "cotton",
+        help_heading = "Inputs"
+    )]
     pub config: String,
     /// Garment point cache, one sample per clip frame: .pc2 (start frame 0) or .usda/.usdc/.usdz.
-    #[arg(long)]
+    #[arg(long, help_heading = "Outputs")]
     pub out: PathBuf,
     /// Also write the posed body as a point cache (same formats).
-    #[arg(long)]
+    #[arg(long, help_heading = "Outputs")]
     pub body_out: Option<PathBuf>,
     /// Simulate only the clip's first N frames.
-    #[arg(long)]
+    #[arg(long, help_heading = "Inputs")]
     pub frames: Option<usize>,
     /// Seconds the garment settles on the resting body before the lead-in blend.
-    #[arg(long, default_value_t = simulate::SETTLE_S, value_parser = super::args::non_negative::<f32>())]
+    #[arg(long, default_value_t = simulate::SETTLE_S, value_parser = super::args::non_negative::<f32>(), help_heading = "Advanced")]
     pub settle: f32,
     /// Seconds of blending from the rest pose into the clip's first pose.
-    #[arg(long, default_value_t = simulate::BLEND_S, value_parser = super::args::non_negative::<f32>())]
+    #[arg(long, default_value_t = simulate::BLEND_S, value_parser = super::args::non_negative::<f32>(), help_heading = "Advanced")]
     pub blend: f32,
     /// Run N of a perturbed ensemble (for `compare`): the rest hold before the blend lasts
     /// N × 0.1 s longer, so runs 0, 1, 2 … are independent draws of a chaotic garment on the
     /// same clip. 0 is the plain simulation; each N has its own cache entry.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, help_heading = "Advanced")]
     pub perturb: u32,
     /// Stop with an error when a vertex moves faster than this (m/s): the solver exploded.
-    #[arg(long, default_value_t = simulate::SPEED_LIMIT, value_parser = super::args::positive::<f32>())]
+    #[arg(long, default_value_t = simulate::SPEED_LIMIT, value_parser = super::args::positive::<f32>(), help_heading = "Advanced")]
     pub speed_limit: f32,
     /// Cache folder for simulations.
-    #[arg(long, default_value = cache::DEFAULT_DIR)]
+    #[arg(long, default_value = cache::DEFAULT_DIR, help_heading = "Advanced")]
     pub cache: PathBuf,
     /// Neither read nor write the cache.
-    #[arg(long)]
+    #[arg(long, help_heading = "Advanced")]
     pub no_cache: bool,
     /// Blender executable (default: $GARMENTBAKE_BLENDER, else `blender` on PATH).
-    #[arg(long)]
+    #[arg(long, help_heading = "Advanced")]
     pub blender: Option<PathBuf>,
     /// Blender's threads (0: all cores). Results are the same for any count (checked by a test).
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, help_heading = "Advanced")]
     pub threads: usize,
     #[command(flatten)]
     pub output: OutputArgs,

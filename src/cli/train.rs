@@ -32,30 +32,35 @@ pub struct Args {
     #[command(flatten)]
     pub inputs: TrainInputs,
     /// Epochs (passes over the training poses).
-    #[arg(long, default_value_t = TRAIN_DEFAULTS.epochs)]
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.epochs, help_heading = "Training")]
     pub epochs: usize,
     /// Output model (.safetensors).
-    #[arg(long)]
+    #[arg(long, help_heading = "Outputs")]
     pub out: PathBuf,
     /// Continue from OUT's checkpoint (same inputs and settings) up to --epochs.
-    #[arg(long)]
+    #[arg(long, help_heading = "Training")]
     pub resume: bool,
     /// Write the checkpoint after this many epochs (50), this much wall time (300s, 5m) or
     /// whichever comes first (50,5m); always after the last epoch. A checkpoint of a wide model
     /// holds tens of MB of optimizer state, so writing one every epoch costs real time.
-    #[arg(long, default_value = "5m", value_name = "EPOCHS|SECONDSs|MINUTESm")]
+    #[arg(
+        long,
+        default_value = "5m",
+        value_name = "EPOCHS|SECONDSs|MINUTESm",
+        help_heading = "Training"
+    )]
     pub checkpoint_every: CheckpointEvery,
     /// Treat input warnings (garment inside the body, bad faces) as errors.
-    #[arg(long)]
+    #[arg(long, help_heading = "Inputs")]
     pub strict: bool,
     /// Append one JSON object per epoch (loss terms, metrics, learning rate, seconds) to this file.
-    #[arg(long)]
+    #[arg(long, help_heading = "Outputs")]
     pub log: Option<PathBuf>,
     /// Early stopping: stop once this many epochs pass without a lower validation loss (the
     /// training potential on the held-out poses, computed every --validate-every epochs), and
     /// write the best validated epoch's weights as OUT. The learning-rate schedule still spans
     /// --epochs, so a run that stops early stops at a higher rate than the schedule's end.
-    #[arg(long, value_name = "EPOCHS", value_parser = clap::value_parser!(u64).range(1..))]
+    #[arg(long, value_name = "EPOCHS", value_parser = clap::value_parser!(u64).range(1..), help_heading = "Training")]
     pub patience: Option<u64>,
     #[command(flatten)]
     pub output: OutputArgs,

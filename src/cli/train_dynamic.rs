@@ -73,7 +73,13 @@ pub struct Args {
     #[arg(long, default_value_t = 50.0, value_parser = super::args::positive::<f64>())]
     pub kernel_radius_mm: f64,
     /// Fabric the simulations used (recorded in the model).
-    #[arg(long, default_value = "cotton")]
+    #[arg(
+        long = "fabric",
+        alias = "config",
+        value_name = "FABRIC",
+        default_value = "cotton",
+        help_heading = "Inputs"
+    )]
     pub config: String,
     #[arg(long, default_value_t = 30)]
     pub epochs: usize,
@@ -118,14 +124,14 @@ pub struct Args {
     /// Stage dynamic: the rounds' roll-outs run the collision fix, as `rollout` plays the
     /// model, so the integrator is refitted on the histories it meets at play time (the fix
     /// makes a round ~3× slower).
-    #[arg(long)]
+    #[arg(long, hide = true)]
     pub rollout_fix: bool,
     /// Stage dynamic: the rounds' roll-outs restart every N frames from the simulation's
     /// moving state there, instead of running each whole clip from its first frame: the
     /// integrator is then refitted on histories that drifted for up to N frames (the states it
     /// meets near the simulation) rather than on ones far from any simulated state. 0: whole
     /// clips.
-    #[arg(long, default_value_t = 0, value_name = "N")]
+    #[arg(long, default_value_t = 0, value_name = "N", hide = true)]
     pub rollout_window: usize,
     /// With --rollout-fix: the fix as `rollout` runs it.
     #[command(flatten)]
@@ -134,12 +140,12 @@ pub struct Args {
     /// local rotations of the joints that move the garment, their speed, the root's velocity
     /// and turn. Without it the integrator sees the body only through the garment it carries,
     /// as in the paper. On whenever settling (the default); see docs/dynamic.md.
-    #[arg(long)]
+    #[arg(long, hide = true)]
     pub body_drive: bool,
     /// Stage dynamic, with --body-drive: ridge penalty on the drive's weights, relative to each
     /// drive input's own mean square (stronger: the drive nudges the integrator instead of
     /// steering it).
-    #[arg(long, default_value_t = 1.0, value_parser = super::args::non_negative::<f64>())]
+    #[arg(long, default_value_t = 1.0, value_parser = super::args::non_negative::<f64>(), hide = true)]
     pub drive_ridge: f64,
     /// Stage dynamic (not in the paper): epochs of the learnt latent dynamics, a small network
     /// beside the linear integrator fitted through the model's own roll-outs of the training

@@ -41,29 +41,29 @@ pub struct Args {
     /// .usdz.
     pub file: PathBuf,
     /// The model the file was made from (.safetensors): replay the file against it.
-    #[arg(long, requires = "motion")]
+    #[arg(long, requires = "motion", help_heading = "Inputs")]
     pub model: Option<PathBuf>,
     /// The clip (BVH) the file plays, retargeted onto the model's skeleton as bake does.
-    #[arg(long, requires = "model")]
+    #[arg(long, requires = "model", help_heading = "Inputs")]
     pub motion: Option<PathBuf>,
     /// Joint-name map(s) (TOML) for the clip, as given to bake.
-    #[arg(long = "map")]
+    #[arg(long = "map", help_heading = "Inputs")]
     pub maps: Vec<PathBuf>,
     /// The rate the file was baked at (--fps of bake); with --reference, the caches' rate.
-    #[arg(long, value_parser = super::args::positive::<f32>())]
+    #[arg(long, value_parser = super::args::positive::<f32>(), help_heading = "Inputs")]
     pub fps: Option<f32>,
     /// A point cache (.pc2 / .mdd) the file must play frame for frame, vertex for vertex,
     /// instead of --model: a dynamic model's roll-out (its garment depends on where the roll-out
     /// started and on the collision fix, so it is compared with a cache, not re-run) or a
     /// simulation.
-    #[arg(long, conflicts_with = "model")]
+    #[arg(long, conflicts_with = "model", help_heading = "Inputs")]
     pub reference: Option<PathBuf>,
     /// Largest replay error allowed, in millimetres.
-    #[arg(long, default_value_t = 1.0, value_parser = super::args::positive::<f64>())]
+    #[arg(long, default_value_t = 1.0, value_parser = super::args::positive::<f64>(), help_heading = "Advanced")]
     pub tolerance_mm: f64,
     /// Write the worst frame, coloured by replay error (green: under a tenth of the tolerance,
     /// red: at or past it), as a PNG.
-    #[arg(long, requires = "model")]
+    #[arg(long, requires = "model", help_heading = "Outputs")]
     pub png: Option<PathBuf>,
     #[command(flatten)]
     pub compute: ComputeArgs,

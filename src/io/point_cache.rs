@@ -1,5 +1,5 @@
-//! Reading point caches back (PC2): a garment's vertices per frame, checked against the mesh
-//! they belong to.
+//! Point caches of our meshes: written through `exporters` (a mesh's frames in the format the
+//! file's extension names) and read back (PC2), checked against the mesh they belong to.
 
 use anyhow::{bail, Context, Result};
 use std::path::Path;
@@ -26,4 +26,41 @@ pub fn read_pc2(path: &Path, vertices: usize) -> Result<Vec<Vec<[f32; 3]>>> {
         bail!("{}: frame {f} has non-finite points", path.display());
     }
     Ok(frames)
+}
+
+/// A per-frame point cache of `mesh`'s vertices, in the format the extension names.
+pub fn write_cache(
+    path: &Path,
+    mesh: &crate::geometry::TriMesh,
+    frames: &[Vec<[f32; 3]>],
+    fps: f32,
+) -> Result<()> {
+    let name = path
+        .file_stem()
+        .map_or("cache".into(), |s| s.to_string_lossy().into_owned());
+    write_caches(path, &[(&name, mesh, frames)], fps)
+}
+
+/// A named mesh and its frames, one entry of [`write_caches`].
+pub type NamedFrames<'a> = (&'a str, &'a crate::geometry::TriMesh, &'a [Vec<[f32; 3]>]);
+
+/// Several meshes' frames of one shot (a garment and the body it moves on), each named, in one
+/// file: a USD stage (one mesh: any point-cache format).
+pub fn write_caches(path: &Path, meshes: &[NamedFrames], fps: f32) -> Result<()> {
+    let caches: Vec<exporters::PointCache> = meshes
+        .iter()
+        .map(|&(name, mesh, frames)| exporters::PointCache {
+            name: name.into(),
+            fps,
+            triangles: mesh.triangles.clone(),
+            uvs: None,
+            point_count: mesh.vertex_count(),
+            points: frames.iter().flatten().copied().collect(),
+        })
+        .collect();
+    match caches.as_slice() {
+        [one] => exporters::write_point_cache(one, path),
+        all => exporters::write_point_caches(all, path),
+    }
+    .with_context(|| format!("writing {}", path.display()))
 }

@@ -14,6 +14,7 @@
 
 mod font;
 mod framing;
+pub mod layout;
 pub mod plot;
 mod raster;
 mod sheet;

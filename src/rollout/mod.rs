@@ -10,6 +10,7 @@
 pub mod contact;
 pub mod paper_fix;
 pub mod surface;
+pub mod timing;
 
 use crate::body::Body;
 use crate::geometry::StrainLimit;

@@ -182,7 +182,7 @@ fn network_cache(path: &Path, frames: usize, dx: f32) {
         tch::Device::Cpu,
     );
     x.iter_mut().flatten().for_each(|p| p[0] += dx);
-    garmentbake::cli::args::write_cache(path, &file.garment, &x, 10.0).unwrap();
+    garmentbake::io::point_cache::write_cache(path, &file.garment, &x, 10.0).unwrap();
 }
 
 #[test]
