@@ -225,6 +225,28 @@ impl CollisionFixArgs {
     }
 }
 
+/// The fabric of a garment: its physical parameters, and with `simulate` Blender's cloth
+/// settings (the fabric file's [simulate] table).
+#[derive(clap::Args)]
+pub struct FabricArgs {
+    /// Fabric: a FABRIC.toml or a preset name (cotton, silk, denim, jersey); `--config` is its
+    /// old name (batch plans still pass it).
+    #[arg(
+        long = "fabric",
+        alias = "config",
+        value_name = "FABRIC",
+        default_value = "cotton",
+        help_heading = "Inputs"
+    )]
+    pub fabric: String,
+}
+
+impl FabricArgs {
+    pub fn load(&self) -> Result<crate::fabric::Fabric> {
+        crate::fabric::Fabric::load(&self.fabric)
+    }
+}
+
 /// The documented training defaults, shared with the library (`Settings::DEFAULT`).
 pub const TRAIN_DEFAULTS: Settings = Settings::DEFAULT;
 
@@ -241,15 +263,8 @@ pub struct TrainInputs {
     /// The training clips (BVH): the poses come from them.
     #[command(flatten)]
     pub clips: ClipArgs,
-    /// Fabric: a FABRIC.toml or a preset name (cotton, silk, denim, jersey).
-    #[arg(
-        long = "fabric",
-        alias = "config",
-        value_name = "FABRIC",
-        default_value = "cotton",
-        help_heading = "Inputs"
-    )]
-    pub config: String,
+    #[command(flatten)]
+    pub fabric: FabricArgs,
     /// Seed: same seed and inputs → byte-identical model.
     #[arg(long, default_value_t = TRAIN_DEFAULTS.seed, help_heading = "Training")]
     pub seed: u64,
@@ -332,7 +347,7 @@ impl TrainInputs {
             motions: &self.clips.motions,
             maps: &self.clips.maps,
             fps: self.clips.fps,
-            fabric: &self.config,
+            fabric: &self.fabric.fabric,
         };
         if !(self.coverage.is_finite() && self.coverage >= 0.0) {
             bail!(

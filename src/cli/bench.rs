@@ -2,9 +2,8 @@
 //! `garmentbake bench rollout`: a dynamic model's roll-out against Blender's cloth solver on the
 //! same frames, in the same run.
 
-use super::args::{CollisionFixArgs, ComputeArgs, OutputArgs, TrainInputs};
+use super::args::{CollisionFixArgs, ComputeArgs, FabricArgs, OutputArgs, TrainInputs};
 use super::Execute;
-use crate::fabric::Fabric;
 use crate::garment::Garment;
 use crate::io::gltf_body::read_body;
 use crate::motion::{load_clip, read_maps};
@@ -52,15 +51,8 @@ struct RolloutBench {
     /// Joint-name map(s) (TOML) for the clip.
     #[arg(long = "map")]
     maps: Vec<PathBuf>,
-    /// Fabric preset or FABRIC.toml for the simulation.
-    #[arg(
-        long = "fabric",
-        alias = "config",
-        value_name = "FABRIC",
-        default_value = "cotton",
-        help_heading = "Inputs"
-    )]
-    config: String,
+    #[command(flatten)]
+    fabric: FabricArgs,
     /// Frames of the clip, from its start.
     #[arg(long, default_value_t = 60)]
     frames: usize,
@@ -163,7 +155,7 @@ impl RolloutBench {
         let plain = roll(false)?;
         let fixed = roll(true)?;
         say("simulating the same frames in Blender (no cache)");
-        let fabric = Fabric::load(&self.config)?;
+        let fabric = self.fabric.load()?;
         let scene = Scene {
             body: &body,
             garment: &garment,

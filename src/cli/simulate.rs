@@ -1,8 +1,7 @@
 //! `garmentbake simulate`: cloth-simulated ground truth of a garment on a clip (Blender).
 
-use super::args::{ClipArgs, OutputArgs};
+use super::args::{ClipArgs, FabricArgs, OutputArgs};
 use super::Execute;
-use crate::fabric::Fabric;
 use crate::garment::Garment;
 use crate::io::gltf_body::read_body;
 use crate::io::point_cache::write_cache;
@@ -38,16 +37,8 @@ pub struct Args {
     /// The clip (one --motion).
     #[command(flatten)]
     pub clips: ClipArgs,
-    /// Fabric: a FABRIC.toml or a preset name (cotton, silk, denim, jersey); its [simulate]
-    /// table sets Blender's cloth.
-    #[arg(
-        long = "fabric",
-        alias = "config",
-        value_name = "FABRIC",
-        default_value = "cotton",
-        help_heading = "Inputs"
-    )]
-    pub config: String,
+    #[command(flatten)]
+    pub fabric: FabricArgs,
     /// Garment point cache, one sample per clip frame: .pc2 (start frame 0) or .usda/.usdc/.usdz.
     #[arg(long, help_heading = "Outputs")]
     pub out: PathBuf,
@@ -145,7 +136,7 @@ impl Execute for Args {
         if let Some(p) = garment.fit_problems(&body)?.first() {
             bail!("{}: {p}", self.garment.display());
         }
-        let fabric = Fabric::load(&self.config)?;
+        let fabric = self.fabric.load()?;
         let (motion, clip) = self.clips.load_single(&body.skeleton)?;
         let mut settings = self.settings()?;
         settings.blender = simulate::blender::find(self.blender.as_deref())?;

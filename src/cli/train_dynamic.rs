@@ -1,8 +1,9 @@
 //! `garmentbake train-dynamic`: the motion-guided dynamic model, trained on simulated clips.
 
-use super::args::{output_set, ClipArgs, CollisionFixArgs, ComputeArgs, OutputArgs, Writes, MODEL};
+use super::args::{
+    output_set, ClipArgs, CollisionFixArgs, ComputeArgs, FabricArgs, OutputArgs, Writes, MODEL,
+};
 use super::Execute;
-use crate::fabric::Fabric;
 use crate::garment::Garment;
 use crate::io::gltf_body::read_body;
 use crate::models::dynamic::SpaceShape;
@@ -72,15 +73,8 @@ pub struct Args {
     /// the hips and both legs at once).
     #[arg(long, default_value_t = 50.0, value_parser = super::args::positive::<f64>())]
     pub kernel_radius_mm: f64,
-    /// Fabric the simulations used (recorded in the model).
-    #[arg(
-        long = "fabric",
-        alias = "config",
-        value_name = "FABRIC",
-        default_value = "cotton",
-        help_heading = "Inputs"
-    )]
-    pub config: String,
+    #[command(flatten)]
+    pub fabric: FabricArgs,
     #[arg(long, default_value_t = 30)]
     pub epochs: usize,
     /// Frames per optimisation step (space 4, dynamic 8).
@@ -345,7 +339,7 @@ impl Args {
             8,
             &garment_path.display().to_string(),
         )?;
-        let fabric = Fabric::load(&self.config)?;
+        let fabric = self.fabric.load()?;
         let n = garment.mesh.vertex_count();
         let train = sequences(
             &self.clips.motions,

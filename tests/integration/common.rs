@@ -267,3 +267,70 @@ pub fn garmentbake_json(args: &[&str]) -> serde_json::Value {
     );
     serde_json::from_slice(&out.stdout).expect("a JSON report")
 }
+
+/// Lowest vertex height of the vertices mostly skinned to `joints`, for every frame.
+pub fn lowest_vertex(
+    body: &garmentbake::body::Body,
+    anim: &garmentbake::rig::SkelAnimation,
+    joints: &[usize],
+) -> Vec<f32> {
+    let region: Vec<u32> = (0..body.mesh.vertex_count() as u32)
+        .filter(|&v| {
+            body.skin
+                .vertex(v as usize)
+                .max_by(|a, b| a.1.total_cmp(&b.1))
+                .is_some_and(|(j, _)| joints.contains(&j))
+        })
+        .collect();
+    let pts: Vec<[f32; 3]> = region
+        .iter()
+        .map(|&v| body.mesh.positions[v as usize])
+        .collect();
+    let sub = body.skin.subset(&region);
+    (0..anim.frame_count())
+        .map(|f| {
+            let skinning = body.skeleton.skinning_matrices(&anim.local_pose(f));
+            sub.skin_points(&pts, &skinning)
+                .iter()
+                .map(|p| p[1])
+                .fold(f32::INFINITY, f32::min)
+        })
+        .collect()
+}
+
+/// The simulation cache the tests share: a simulation is run once per build.
+pub fn sim_cache() -> &'static str {
+    static CACHE: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    CACHE.get_or_init(|| {
+        root()
+            .join("target/test-out/sim-cache")
+            .display()
+            .to_string()
+    })
+}
+
+/// `simulate` of the sample skirt on 131_01 at 30 fps for `frames` frames, with paths relative to
+/// the repository root ([`garmentbake_in_root`]); add the lead-in, the cache and `--out`.
+pub fn skirt_simulation(frames: &str) -> Vec<&str> {
+    let mut args = vec!["simulate"];
+    args.extend(SKIRT_ON_131_01);
+    args.extend(["--fps", "30", "--frames", frames]);
+    args
+}
+
+/// The inputs of the dynamic tests (relative to the repository root): the sample body, the
+/// sample skirt and the walk 131_01.
+pub const SKIRT_ON_131_01: [&str; 6] = [
+    "--body",
+    "samples/body.glb",
+    "--garment",
+    "samples/garments/skirt.obj",
+    "--motion",
+    "samples/motions/131_01.bvh",
+];
+
+/// The short lead-in of the tests' simulations (settle 0.1 s, blend 0.2 s), cached in
+/// [`sim_cache`]: a few seconds of Blender per build instead of the default second of lead-in.
+pub fn short_lead_in_cached() -> [&'static str; 6] {
+    ["--settle", "0.1", "--blend", "0.2", "--cache", sim_cache()]
+}

@@ -13,32 +13,11 @@ const FRAMES: &str = "12";
 /// Run `perturb` of the skirt on 131_01 (shared cache: simulated once per checkout).
 fn run(dir: &Path, perturb: u32) -> (PathBuf, serde_json::Value) {
     let out = dir.join(format!("run{perturb}.pc2"));
-    let cache = root().join("target/test-out/sim-cache");
     let p = perturb.to_string();
-    let report = garmentbake_json(&[
-        "simulate",
-        "--body",
-        "samples/body.glb",
-        "--garment",
-        "samples/garments/skirt.obj",
-        "--motion",
-        "samples/motions/131_01.bvh",
-        "--fps",
-        "30",
-        "--frames",
-        FRAMES,
-        "--settle",
-        "0.1",
-        "--blend",
-        "0.2",
-        "--perturb",
-        &p,
-        "--cache",
-        cache.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--json",
-    ]);
+    let mut args = skirt_simulation(FRAMES);
+    args.extend(short_lead_in_cached());
+    args.extend(["--perturb", &p, "--out", out.to_str().unwrap(), "--json"]);
+    let report = garmentbake_json(&args);
     (out, report)
 }
 
@@ -59,14 +38,9 @@ fn write(path: &Path, frames: &[Vec<[f32; 3]>]) {
 }
 
 fn compare_args<'a>(sims: &'a [String], horizon: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
-    let mut args = vec![
-        "compare",
-        "--body",
-        "samples/body.glb",
-        "--garment",
-        "samples/garments/skirt.obj",
-        "--motion",
-        "samples/motions/131_01.bvh",
+    let mut args = vec!["compare"];
+    args.extend(SKIRT_ON_131_01);
+    args.extend([
         "--fps",
         "30",
         "--frames",
@@ -75,7 +49,7 @@ fn compare_args<'a>(sims: &'a [String], horizon: &'a str, extra: &[&'a str]) -> 
         horizon,
         "--restart-every",
         "3",
-    ];
+    ]);
     for s in sims {
         args.extend_from_slice(&["--sim", s]);
     }
@@ -253,12 +227,6 @@ fn a_dynamic_model_is_restarted_from_each_runs_state() {
         dir.join("hold.pc2"),
     );
     let clip = [
-        "--body",
-        "samples/body.glb",
-        "--garment",
-        "samples/garments/skirt.obj",
-        "--motion",
-        "samples/motions/131_01.bvh",
         "--sim",
         r0,
         "--fps",
@@ -270,6 +238,7 @@ fn a_dynamic_model_is_restarted_from_each_runs_state() {
         "--json",
     ];
     let mut args = vec!["train-dynamic", "--out", space.to_str().unwrap()];
+    args.extend(SKIRT_ON_131_01);
     args.extend_from_slice(&clip);
     garmentbake_json(&args);
     // "Hold the latent" (a huge ridge pins the integrator to its previous latent): restarted,
@@ -288,6 +257,7 @@ fn a_dynamic_model_is_restarted_from_each_runs_state() {
         "--out",
         model.to_str().unwrap(),
     ];
+    args.extend(SKIRT_ON_131_01);
     args.extend_from_slice(&clip);
     garmentbake_json(&args);
     let m = model.to_str().unwrap();

@@ -10,28 +10,10 @@ use std::path::{Path, PathBuf};
 /// Six simulated frames of the skirt on 131_01 (shared cache: simulated once per checkout).
 fn short_sim(dir: &Path) -> PathBuf {
     let out = dir.join("skirt_sim.pc2");
-    let cache = root().join("target/test-out/sim-cache");
-    let o = garmentbake_in_root(&[
-        "simulate",
-        "--body",
-        "samples/body.glb",
-        "--garment",
-        "samples/garments/skirt.obj",
-        "--motion",
-        "samples/motions/131_01.bvh",
-        "--fps",
-        "30",
-        "--frames",
-        "6",
-        "--settle",
-        "0.1",
-        "--blend",
-        "0.2",
-        "--cache",
-        cache.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let mut args = skirt_simulation("6");
+    args.extend(short_lead_in_cached());
+    args.extend(["--out", out.to_str().unwrap()]);
+    let o = garmentbake_in_root(&args);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     out
 }
@@ -46,14 +28,9 @@ pub fn untrained_space(name: &str) -> (PathBuf, PathBuf, PathBuf) {
 }
 
 fn train(sim: &Path, out: &Path, epochs: &str, extra: &[&str]) -> serde_json::Value {
-    let mut args = vec![
-        "train-dynamic",
-        "--body",
-        "samples/body.glb",
-        "--garment",
-        "samples/garments/skirt.obj",
-        "--motion",
-        "samples/motions/131_01.bvh",
+    let mut args = vec!["train-dynamic"];
+    args.extend(SKIRT_ON_131_01);
+    args.extend([
         "--sim",
         sim.to_str().unwrap(),
         "--fps",
@@ -69,7 +46,7 @@ fn train(sim: &Path, out: &Path, epochs: &str, extra: &[&str]) -> serde_json::Va
         "--out",
         out.to_str().unwrap(),
         "--json",
-    ];
+    ]);
     args.extend_from_slice(extra);
     garmentbake_json(&args)
 }
@@ -178,29 +155,12 @@ fn bad_inputs_name_the_file_and_write_nothing() {
     let err = fails("samples/garments/shirt.obj", &sim);
     assert!(err.contains("shirt.obj has no UVs"), "{err}");
     let body_cache = dir.join("body.pc2");
-    let o = garmentbake_in_root(&[
-        "simulate",
-        "--body",
-        "samples/body.glb",
-        "--garment",
-        "samples/garments/skirt.obj",
-        "--motion",
-        "samples/motions/131_01.bvh",
-        "--fps",
-        "30",
-        "--frames",
-        "6",
-        "--settle",
-        "0.1",
-        "--blend",
-        "0.2",
-        "--cache",
-        root().join("target/test-out/sim-cache").to_str().unwrap(),
-        "--out",
-        dir.join("again.pc2").to_str().unwrap(),
-        "--body-out",
-        body_cache.to_str().unwrap(),
-    ]);
+    let again = dir.join("again.pc2");
+    let mut args = skirt_simulation("6");
+    args.extend(short_lead_in_cached());
+    args.extend(["--out", again.to_str().unwrap()]);
+    args.extend(["--body-out", body_cache.to_str().unwrap()]);
+    let o = garmentbake_in_root(&args);
     assert!(o.status.success());
     let err = fails("samples/garments/skirt.obj", &body_cache);
     assert!(

@@ -29,22 +29,6 @@ fn run(args: &[&str]) -> std::process::Output {
     garmentbake_in_root(args)
 }
 
-/// [`one_error_line`] for commands that fail after their work: progress lines a log gets off a
-/// terminal (`progress: ...`) may come before the error line.
-fn the_error_line(output: &std::process::Output, out: &Path) -> String {
-    let err = String::from_utf8_lossy(&output.stderr);
-    let kept: Vec<&str> = err
-        .lines()
-        .filter(|l| !l.trim().is_empty() && !l.starts_with("progress: "))
-        .collect();
-    let trimmed = std::process::Output {
-        status: output.status,
-        stdout: Vec::new(),
-        stderr: kept.join("\n").into_bytes(),
-    };
-    one_error_line(&trimmed, out)
-}
-
 /// The PBNS model the bake tests train once per run.
 fn pbns_model() -> String {
     crate::bake::model().display().to_string()
@@ -55,24 +39,10 @@ fn simulate_checks_body_out_before_simulating() {
     let dir = out_dir("outputs_simulate");
     let out = dir.join("skirt.pc2");
     let base = |body_out: &Path| {
-        run(&[
-            "simulate",
-            "--body",
-            "samples/body.glb",
-            "--garment",
-            "samples/garments/skirt.obj",
-            "--motion",
-            "samples/motions/131_01.bvh",
-            "--fps",
-            "30",
-            "--frames",
-            "6",
-            "--no-cache",
-            "--out",
-            out.to_str().unwrap(),
-            "--body-out",
-            body_out.to_str().unwrap(),
-        ])
+        let mut args = skirt_simulation("6");
+        args.extend(["--no-cache", "--out", out.to_str().unwrap()]);
+        args.extend(["--body-out", body_out.to_str().unwrap()]);
+        run(&args)
     };
     // Before: the simulation ran, --out was written, then --body-out failed.
     let err = one_error_line(&base(&dir.join("body.obj")), &out);
@@ -121,7 +91,7 @@ fn eval_writes_its_outputs_all_or_nothing() {
     std::fs::write(&out, b"old bytes").unwrap();
     let blocked = dir.join("body.pc2");
     std::fs::create_dir(&blocked).unwrap();
-    let err = the_error_line(&eval(&blocked, &page), &page);
+    let err = one_error_line(&eval(&blocked, &page), &page);
     assert!(err.contains(&*blocked.to_string_lossy()), "{err}");
     assert!(
         std::fs::read(&out).unwrap() == b"old bytes",
@@ -157,7 +127,7 @@ fn bake_with_a_page_writes_both_or_neither() {
     let err = one_error_line(&bake(&dir.join("skirt.png")), &out);
     assert!(err.contains("--view") && err.contains(".html"), "{err}");
     let (page, old) = occupied_target(&dir, "skirt.html");
-    let err = the_error_line(&bake(&page), &out);
+    let err = one_error_line(&bake(&page), &out);
     assert!(err.contains(&*page.to_string_lossy()), "{err}");
     assert_left_untouched(&dir, &old);
     std::fs::remove_dir_all(&page).unwrap();
@@ -234,7 +204,7 @@ fn bake_and_eval_on_a_full_disk_leave_nothing() {
         "--view",
         disk.dir.join("skirt.html").to_str().unwrap(),
     ]);
-    let err = the_error_line(&o, &glb);
+    let err = one_error_line(&o, &glb);
     assert!(err.contains("No space left on device"), "{err}");
     assert!(err.contains(&*disk.dir.to_string_lossy()), "{err}");
     disk.assert_nothing_left(&[]);
@@ -256,7 +226,7 @@ fn bake_and_eval_on_a_full_disk_leave_nothing() {
         "--body-out",
         body.to_str().unwrap(),
     ]);
-    let err = the_error_line(&o, &body);
+    let err = one_error_line(&o, &body);
     assert!(
         err.contains("No space left on device") && err.contains(&*body.to_string_lossy()),
         "{err}"
@@ -303,7 +273,7 @@ fn rollout_outputs_are_checked_first_and_fail_together_on_a_full_disk() {
     let disk = FullDisk::mount("outputs_full_rollout");
     let lbs = disk.dir.join("lbs.pc2");
     let o = rollout(&["--lbs-out", lbs.to_str().unwrap()]);
-    let err = the_error_line(&o, &lbs);
+    let err = one_error_line(&o, &lbs);
     assert!(
         err.contains("No space left on device") && err.contains(&*lbs.to_string_lossy()),
         "{err}"
@@ -365,7 +335,7 @@ gltf = {{ max_targets = 4 }}
             "{}",
             String::from_utf8_lossy(&o.stdout)
         );
-        let err = the_error_line(o, &out.join("skirt"));
+        let err = one_error_line(o, &out.join("skirt"));
         assert!(
             err.contains("train:skirt")
                 && err.contains("No space left on device")

@@ -4,36 +4,6 @@ use crate::common::*;
 use garmentbake::io::gltf_body::read_body;
 use garmentbake::motion::load_clip;
 
-/// Lowest vertex height of the vertices mostly skinned to `joints`, for every frame.
-fn lowest_vertex(
-    body: &garmentbake::body::Body,
-    anim: &garmentbake::rig::SkelAnimation,
-    joints: &[usize],
-) -> Vec<f32> {
-    let region: Vec<u32> = (0..body.mesh.vertex_count() as u32)
-        .filter(|&v| {
-            body.skin
-                .vertex(v as usize)
-                .max_by(|a, b| a.1.total_cmp(&b.1))
-                .is_some_and(|(j, _)| joints.contains(&j))
-        })
-        .collect();
-    (0..anim.frame_count())
-        .map(|f| {
-            let skinning = body.skeleton.skinning_matrices(&anim.local_pose(f));
-            let pts: Vec<[f32; 3]> = region
-                .iter()
-                .map(|&v| body.mesh.positions[v as usize])
-                .collect();
-            let sub = body.skin.subset(&region);
-            sub.skin_points(&pts, &skinning)
-                .iter()
-                .map(|p| p[1])
-                .fold(f32::INFINITY, f32::min)
-        })
-        .collect()
-}
-
 #[test]
 fn retargeted_walk_keeps_stance_feet_on_the_floor_and_the_body_upright() {
     let body = read_body(&sample("body.glb")).unwrap();

@@ -467,36 +467,6 @@ fn every_character_creator_take_poses_with_the_feet_on_the_floor() {
 /// floor test reports them but does not hold them to 3 cm.
 const OFF_THE_FLOOR: [&str; 4] = ["001_08.bvh", "001_14.bvh", "003_01.bvh", "003_02.bvh"];
 
-/// Lowest vertex height of the vertices mostly skinned to `joints`, for every frame.
-fn lowest_vertex(
-    body: &garmentbake::body::Body,
-    anim: &SkelAnimation,
-    joints: &[usize],
-) -> Vec<f32> {
-    let region: Vec<u32> = (0..body.mesh.vertex_count() as u32)
-        .filter(|&v| {
-            body.skin
-                .vertex(v as usize)
-                .max_by(|a, b| a.1.total_cmp(&b.1))
-                .is_some_and(|(j, _)| joints.contains(&j))
-        })
-        .collect();
-    let pts: Vec<[f32; 3]> = region
-        .iter()
-        .map(|&v| body.mesh.positions[v as usize])
-        .collect();
-    let sub = body.skin.subset(&region);
-    (0..anim.frame_count())
-        .map(|f| {
-            let skinning = body.skeleton.skinning_matrices(&anim.local_pose(f));
-            sub.skin_points(&pts, &skinning)
-                .iter()
-                .map(|p| p[1])
-                .fold(f32::INFINITY, f32::min)
-        })
-        .collect()
-}
-
 /// Bad maps for a production rig: a joint the clip lacks, no hips, a whole leg folded away — one
 /// `error:` line each, exit code 2, nothing written.
 #[test]
