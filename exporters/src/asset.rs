@@ -60,6 +60,10 @@ pub struct Mesh {
     /// (`k / SHORT_STEPS`): glTF stores them as 16-bit integers under KHR_mesh_quantization,
     /// half the bytes of floats and exact. Readers without the extension refuse such a file.
     pub quantized_blend_shapes: bool,
+    /// The blend-shape weights a reader shows when no animation plays (glTF `mesh.weights`):
+    /// the bakes' weights start at 0 at each target's lowest point, so all-0 would show a
+    /// distorted garment. Empty: all 0.
+    pub rest_weights: Vec<f32>,
 }
 
 /// A clip: joint local transforms and blend-shape weights sampled at a fixed rate.
@@ -152,6 +156,14 @@ impl BakedAsset {
                 return Err(format!(
                     "mesh '{}': normals or UVs do not match {n} vertices",
                     mesh.name
+                ));
+            }
+            if !mesh.rest_weights.is_empty() && mesh.rest_weights.len() != mesh.blend_shapes.len() {
+                return Err(format!(
+                    "mesh '{}': {} rest weights for {} blend shapes",
+                    mesh.name,
+                    mesh.rest_weights.len(),
+                    mesh.blend_shapes.len()
                 ));
             }
             if mesh.blend_shapes.iter().any(|b| {

@@ -399,7 +399,10 @@ fn add_mesh(b: &mut Builder, mesh: &Mesh) -> json::Index<json::Mesh> {
             mode: Valid(json::mesh::Mode::Triangles),
             targets,
         }],
-        weights: (!names.is_empty()).then(|| vec![0.0; names.len()]),
+        weights: (!names.is_empty()).then(|| match mesh.rest_weights.is_empty() {
+            true => vec![0.0; names.len()],
+            false => mesh.rest_weights.clone(),
+        }),
     })
 }
 

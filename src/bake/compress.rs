@@ -173,7 +173,7 @@ impl Compressed {
     }
 
     /// [`weights_from_zero`] on this set.
-    pub fn weights_from_zero(&mut self) -> Vec<[f32; 3]> {
+    pub fn weights_from_zero(&mut self) -> FromZero {
         weights_from_zero(&self.targets, &mut self.weights)
     }
 }
@@ -198,25 +198,37 @@ pub fn unit_targets(targets: &mut [Vec<[f32; 3]>], weights: &mut [Vec<f32>], gri
     }
 }
 
+/// What [`weights_from_zero`] moved: the base mesh's share of the offsets, and the weights that
+/// take it back out.
+pub struct FromZero {
+    /// Rest-space offset `Σ_k min_k S_k` the base mesh takes on.
+    pub base: Vec<[f32; 3]>,
+    /// `-min_k` per target: the shifted weights at which the offsets vanish, i.e. the file's
+    /// base mesh plays the unmoved rest mesh (what a reader should show with no animation).
+    pub rest_weights: Vec<f32>,
+}
+
 /// Shifts each target's weights (`[frame][target]`) to start at 0 over the frames and returns
 /// the rest-space offset `Σ_k min_k S_k` the base mesh takes on instead (the offsets are
 /// unchanged). Readers clamp morph weights: Blender's glTF importer holds shape-key values
 /// inside slider ranges that do not reach below 0 (a negative weight is lost), Godot clamps
 /// to [-1, 1]; unit targets with weights from 0 play in both.
-pub fn weights_from_zero(targets: &[Vec<[f32; 3]>], weights: &mut [Vec<f32>]) -> Vec<[f32; 3]> {
+pub fn weights_from_zero(targets: &[Vec<[f32; 3]>], weights: &mut [Vec<f32>]) -> FromZero {
     let n = targets.first().map_or(0, Vec::len);
     let mut base = vec![[0.0f32; 3]; n];
+    let mut rest_weights = vec![0.0f32; targets.len()];
     for (k, target) in targets.iter().enumerate() {
         let lowest = weights.iter().map(|w| w[k]).fold(f32::INFINITY, f32::min);
         if !lowest.is_finite() {
             continue;
         }
         weights.iter_mut().for_each(|w| w[k] -= lowest);
+        rest_weights[k] = -lowest;
         for (b, t) in base.iter_mut().zip(target) {
             (0..3).for_each(|a| b[a] += lowest * t[a]);
         }
     }
-    base
+    FromZero { base, rest_weights }
 }
 
 /// Rest-space offsets `Σ_k c_fk S_k` of every frame as a 3N × frames matrix, one contiguous
@@ -334,7 +346,7 @@ mod tests {
         // From zero: every weight non-negative, and the base's offset plus the shifted targets
         // give the same offsets.
         let mut shifted = picked.clone();
-        let base = shifted.weights_from_zero();
+        let FromZero { base, rest_weights } = shifted.weights_from_zero();
         assert!(shifted.weights.iter().flatten().all(|&w| w >= 0.0));
         assert!(shifted.weights.iter().flatten().any(|&w| w == 0.0));
         let moved = offset_matrix(&shifted.targets, &shifted.weights);
@@ -344,6 +356,11 @@ mod tests {
                 let now = moved[(r, f)] + base[r / 3][r % 3];
                 assert!((now - before[(r, f)]).abs() < 1e-6, "frame {f} row {r}");
             }
+        }
+        // The rest weights take the base's share back out: the unmoved rest mesh.
+        let at_rest = offset_matrix(&shifted.targets, std::slice::from_ref(&rest_weights));
+        for (r, v) in at_rest.column(0).iter().enumerate() {
+            assert!((v + base[r / 3][r % 3]).abs() < 1e-6, "row {r}");
         }
     }
 }

@@ -1,6 +1,7 @@
 //! Turns rig data and model output into the exporter-neutral baked asset (`exporters::asset`).
 
 pub mod compress;
+pub mod normals;
 pub mod pbns;
 pub mod sequence;
 
@@ -97,6 +98,7 @@ pub fn skinned_mesh_asset(
         source_vertex,
         color,
         quantized_blend_shapes: false,
+        rest_weights: Vec::new(),
     }
 }
 

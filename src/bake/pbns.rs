@@ -3,8 +3,9 @@
 //! the MLP output projected on it, one weight track per clip.
 
 use super::compress::{
-    offset_matrix, spectrum, spectrum_of, unit_targets, weights_from_zero, UsedOffsets,
+    offset_matrix, spectrum, spectrum_of, unit_targets, weights_from_zero, FromZero, UsedOffsets,
 };
+use super::normals;
 use super::{animation_asset, moved_by, skeleton_asset, skinned_mesh_asset, BODY_COLOR};
 use crate::models::file::ModelFile;
 use crate::models::pbns::flat;
@@ -139,21 +140,50 @@ pub fn bake(
     // Unit targets with weights from 0 (the rest moves into the base mesh): the same offsets,
     // and readers that clamp weights (Blender, Godot) play them too.
     unit_targets(&mut targets, &mut weights, false);
-    let base = moved_by(&model.garment, &weights_from_zero(&targets, &mut weights));
-    let mut garment = skinned_mesh_asset("garment", &base, None, &skin, GARMENT_COLOR);
-    garment.blend_shapes = targets
+    let FromZero { base, rest_weights } = weights_from_zero(&targets, &mut weights);
+    let base = moved_by(&model.garment, &base);
+    // Global frame (clips in order) → its clip and frame, for the skinning the normals fit sees.
+    let frames: Vec<(usize, usize)> = clips
         .iter()
         .enumerate()
-        .map(|(k, t)| BlendShape {
+        .flat_map(|(c, clip)| (0..clip.frame_count()).map(move |f| (c, f)))
+        .collect();
+    let skeleton = model.skeleton();
+    let blended = |g: usize| {
+        let (c, f) = frames[g];
+        let skinning = skeleton.skinning_matrices(&clips[c].local_pose(f));
+        (0..skin.vertex_count())
+            .map(|v| skin.blended(v, &skinning))
+            .collect()
+    };
+    let normals = normals::fit(
+        &base.positions,
+        &base.triangles,
+        &targets,
+        &weights,
+        &rest_weights,
+        &blended,
+    );
+    let mut garment =
+        skinned_mesh_asset("garment", &base, Some(&normals.base), &skin, GARMENT_COLOR);
+    let pick = |t: &[[f32; 3]]| -> Vec<[f32; 3]> {
+        garment
+            .source_vertex
+            .iter()
+            .map(|&v| t[v as usize])
+            .collect()
+    };
+    garment.blend_shapes = targets
+        .iter()
+        .zip(&normals.deltas)
+        .enumerate()
+        .map(|(k, (t, n))| BlendShape {
             name: format!("psd_{k:03}"),
-            offsets: garment
-                .source_vertex
-                .iter()
-                .map(|&v| t[v as usize])
-                .collect(),
-            normal_offsets: None,
+            offsets: pick(t),
+            normal_offsets: Some(pick(n)),
         })
         .collect();
+    garment.rest_weights = rest_weights;
     let mut asset = BakedAsset {
         skeleton: skeleton_asset(model.skeleton()),
         meshes: vec![garment],

@@ -6,7 +6,8 @@
 //! ([`super::compress::spectrum_of`]) into the fewest targets within a tolerance, their weights
 //! animated per frame.
 
-use super::compress::spectrum_of;
+use super::compress::{spectrum_of, FromZero};
+use super::normals;
 use super::pbns::GARMENT_COLOR;
 use super::{animation_asset, moved_by, skeleton_asset, skinned_mesh_asset};
 use crate::geometry::TriMesh;
@@ -53,7 +54,8 @@ pub fn bake_sequence(
     // tolerance bounds the world-space one; the world error is measured below all the same.
     let mut kept = spectrum.within_normalized(&residuals, tolerance, quantize);
     // Weights from 0 up (the base mesh takes the rest): readers that clamp them play it too.
-    let base = moved_by(garment, &kept.weights_from_zero());
+    let FromZero { base, rest_weights } = kept.weights_from_zero();
+    let base = moved_by(garment, &base);
     let (max_error_m, mean_error_m) = world_error(
         &base.positions,
         &blended,
@@ -61,18 +63,31 @@ pub fn bake_sequence(
         &kept.targets,
         &kept.weights,
     );
-    let mut mesh = skinned_mesh_asset("garment", &base, None, skin, GARMENT_COLOR);
+    let normals = normals::fit(
+        &base.positions,
+        &base.triangles,
+        &kept.targets,
+        &kept.weights,
+        &rest_weights,
+        &|f| blended[f].clone(),
+    );
+    let mut mesh = skinned_mesh_asset("garment", &base, Some(&normals.base), skin, GARMENT_COLOR);
     mesh.quantized_blend_shapes = quantize;
+    let pick = |t: &[[f32; 3]]| -> Vec<[f32; 3]> {
+        mesh.source_vertex.iter().map(|&v| t[v as usize]).collect()
+    };
     mesh.blend_shapes = kept
         .targets
         .iter()
+        .zip(&normals.deltas)
         .enumerate()
-        .map(|(k, t)| BlendShape {
+        .map(|(k, (t, n))| BlendShape {
             name: format!("residual_{k:03}"),
-            offsets: mesh.source_vertex.iter().map(|&v| t[v as usize]).collect(),
-            normal_offsets: None,
+            offsets: pick(t),
+            normal_offsets: Some(pick(n)),
         })
         .collect();
+    mesh.rest_weights = rest_weights;
     let mut anim = animation_asset(animation);
     anim.blend_shape_weights = vec![(0, kept.weights.iter().flatten().copied().collect())];
     let asset = BakedAsset {

@@ -7,6 +7,7 @@ mod bake;
 mod batch;
 mod compare;
 mod dynamic;
+mod engine;
 mod errors;
 mod flags;
 mod metrics;
