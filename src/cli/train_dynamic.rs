@@ -169,6 +169,11 @@ pub struct Args {
     /// of the training latents' spread.
     #[arg(long, default_value_t = 0.05, value_parser = super::args::non_negative::<f64>())]
     pub dynamics_noise: f64,
+    /// Stage dynamic, with --dynamics-epochs: past frames of the body's motion (root and joint
+    /// rotations and their speeds, as the body drive has them) the learnt dynamics also see,
+    /// so a swing can answer the body's acceleration. 0: the current frame's alone.
+    #[arg(long, default_value_t = 0, value_name = "FRAMES")]
+    pub dynamics_history: usize,
     /// Stage dynamic: channels of the motion features `E_t`.
     #[arg(long, default_value_t = 16)]
     pub motion_features: usize,
@@ -600,6 +605,7 @@ impl Args {
             epochs: self.dynamics_epochs,
             horizon: (first, last),
             noise: self.dynamics_noise,
+            drive_history: self.dynamics_history,
             seed: self.seed,
             // The fit plays the frames as `rollout` does by default.
             strain_band: RolloutSettings::default().strain_band,

@@ -181,6 +181,7 @@ pub fn roll_out(
         bail!("nothing to roll out: the clip has no frames");
     }
     let bodies = BodyFrames::new(body, seeds, poses, device);
+    let drives = model.clip_drives(&bodies, fps)?;
     let at = |f: usize| bodies.select(&Tensor::from_slice(&[f as i64]).to_device(device));
     let start: Vec<Vec<[f32; 3]>> = match init {
         Init::Rest => vec![tch::no_grad(|| {
@@ -218,7 +219,7 @@ pub fn roll_out(
             now: at(t),
             fps,
         };
-        let x = model.step_inputs(&h, linear_only)?;
+        let x = model.step_inputs(&h, linear_only, model.past_drives(&drives, t)?)?;
         timing.inputs_ms = ms(clock);
         let clock = Instant::now();
         let z = model.next_latent(&x, range.as_ref())?;

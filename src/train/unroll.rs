@@ -20,7 +20,7 @@ use crate::geometry::strain_limit::StrainLimit;
 use crate::models::dynamic::learned::{
     DynamicsEpoch, DynamicsFit, DynamicsSettings, LearnedDynamics,
 };
-use crate::models::dynamic::motion::{body_drive, History, StaticInputs};
+use crate::models::dynamic::motion::{drives, past_drives, History, MotionEncoder, StaticInputs};
 use crate::models::dynamic::space::inverse3;
 use crate::models::dynamic::Dynamic;
 use crate::models::dynamic::Space;
@@ -70,19 +70,22 @@ pub fn fit_dynamics(
     let Some(encoder) = dynamic.motion.as_mut() else {
         bail!("the model has no motion stage to give dynamics to");
     };
-    encoder.add_dynamics(&s.widths);
+    encoder.add_dynamics(&s.widths, s.drive_history);
     let encoder = dynamic.motion.as_ref().expect("set above");
+    let history = history_indices(data, data.garment.device());
+    let drives = drives(&data.body, &history[0], &encoder.shape, fps);
+    let clip_first = clip_firsts(data);
     encoder
         .dynamics
         .as_ref()
         .expect("added above")
-        .normalise_to(&teacher_inputs(dynamic, data, fps));
+        .normalise_to(&teacher_inputs(dynamic, data, fps, &drives, &clip_first));
     let posed = PosedFrames::new(&dynamic.space, data);
     let played = Played {
         dynamic,
         data,
         posed: &posed,
-        fps,
+        drives: &drives,
         range,
         limit: (s.strain_iterations > 0).then_some((limit, s.strain_band, s.strain_iterations)),
     };
@@ -216,8 +219,35 @@ fn window_starts(data: &FrameData, k: usize) -> Vec<Window> {
         .collect()
 }
 
-/// `D`'s inputs on every frame's simulated history (its normalisation).
-fn teacher_inputs(dynamic: &Dynamic, data: &FrameData, fps: f64) -> Tensor {
+/// Each training frame's clip's first frame.
+fn clip_firsts(data: &FrameData) -> Vec<i64> {
+    let mut first = vec![0i64; data.len()];
+    for (k, &s) in data.clip_starts.iter().enumerate() {
+        let end = data.clip_starts.get(k + 1).copied().unwrap_or(data.len());
+        first[s..end].fill(s as i64);
+    }
+    first
+}
+
+/// The past drives `D` sees at frames `now` (`motion::past_drives` within their clips).
+fn past_at(encoder: &MotionEncoder, drives: &Tensor, now: &[i64], clip_first: &[i64]) -> Tensor {
+    let firsts: Vec<i64> = now.iter().map(|&t| clip_first[t as usize]).collect();
+    let count = match encoder.past_width() {
+        0 => 0,
+        _ => encoder.shape.dynamics_history,
+    };
+    past_drives(drives, now, &firsts, count)
+}
+
+/// `D`'s inputs on every frame's simulated history (its normalisation); `drives` every frame's
+/// body drive.
+fn teacher_inputs(
+    dynamic: &Dynamic,
+    data: &FrameData,
+    fps: f64,
+    drives: &Tensor,
+    clip_first: &[i64],
+) -> Tensor {
     let encoder = dynamic.motion.as_ref().expect("a motion stage");
     let history = history_indices(data, data.garment.device());
     crate::models::predict_chunks(data.len(), |start, n| {
@@ -237,8 +267,9 @@ fn teacher_inputs(dynamic: &Dynamic, data: &FrameData, fps: f64) -> Tensor {
             fps,
         };
         let (previous, inertia) = StaticInputs::linear(&dynamic.space, &h);
-        let drive = body_drive(&h.before, &h.now, &encoder.shape, fps);
-        LearnedDynamics::inputs(&inertia, &previous, &drive)
+        let now: Vec<i64> = (start as i64..(start + n) as i64).collect();
+        let past = past_at(encoder, drives, &now, clip_first);
+        LearnedDynamics::inputs(&inertia, &previous, &drives.index_select(0, &idx), &past)
     })
 }
 
@@ -292,16 +323,20 @@ fn unroll_loss(
         dynamic,
         data,
         posed,
-        fps,
+        drives,
         range: (lo, hi),
         limit,
     } = model;
     let space = &dynamic.space;
     let encoder = dynamic.motion.as_ref().expect("a motion stage");
     let device = data.garment.device();
-    let frames = |offset: i64| {
-        let idx: Vec<i64> = t0.iter().map(|w| (w.first + offset).max(w.clip)).collect();
-        Tensor::from_slice(&idx).to_device(device)
+    let at =
+        |offset: i64| -> Vec<i64> { t0.iter().map(|w| (w.first + offset).max(w.clip)).collect() };
+    let frames = |offset: i64| Tensor::from_slice(&at(offset)).to_device(device);
+    let firsts: Vec<i64> = t0.iter().map(|w| w.clip).collect();
+    let past_count = match encoder.past_width() {
+        0 => 0,
+        _ => encoder.shape.dynamics_history,
     };
     // The start: the simulated frames t0−1 and t0−2 projected into the space, shifted.
     let start = |offset: i64, eps: Option<&Tensor>| {
@@ -336,14 +371,11 @@ fn unroll_loss(
             ],
             1,
         );
-        let drive = body_drive(
-            &data.body.select(&before_idx),
-            &data.body.select(&now_idx),
-            &encoder.shape,
-            *fps,
-        );
+        // The drive of frame t against t − 1 (the clip's first frame against itself).
+        let drive = drives.index_select(0, &now_idx);
+        let past = past_drives(drives, &at(step), &firsts, past_count);
         let z = encoder
-            .integrate(&inertia, &previous, &drive)
+            .integrate(&inertia, &previous, &drive, &past)
             .clamp_tensor(Some(*lo), Some(*hi));
         let g = Space::skin_blended(
             &space.canonical(&z),
@@ -376,7 +408,8 @@ struct Played<'a> {
     dynamic: &'a Dynamic,
     data: &'a FrameData,
     posed: &'a PosedFrames,
-    fps: f64,
+    /// Every training frame's body drive against its previous frame (`motion::drives`).
+    drives: &'a Tensor,
     range: (&'a Tensor, &'a Tensor),
     /// The roll-out's strain limit, its band and sweeps.
     limit: Option<(&'a StrainLimit, f32, usize)>,

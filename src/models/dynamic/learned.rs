@@ -59,8 +59,8 @@ impl LearnedDynamics {
         }
     }
 
-    /// `x_t` `[B, 3L + D]` from the linear path's inputs.
-    pub fn inputs(inertia: &Tensor, previous: &Tensor, drive: &Tensor) -> Tensor {
+    /// `x_t` `[B, 3L + D + H·D]` from the linear path's inputs and the `H` past drives.
+    pub fn inputs(inertia: &Tensor, previous: &Tensor, drive: &Tensor, past: &Tensor) -> Tensor {
         let l = previous.size()[1];
         Tensor::cat(
             &[
@@ -68,6 +68,7 @@ impl LearnedDynamics {
                 inertia.narrow(1, l, l) - previous,
                 previous.shallow_clone(),
                 drive.shallow_clone(),
+                past.shallow_clone(),
             ],
             1,
         )
@@ -135,6 +136,9 @@ pub struct DynamicsSettings {
     pub strain_band: f32,
     #[serde(default)]
     pub strain_iterations: usize,
+    /// Past body drives `D` sees (frames; `MotionShape::dynamics_history`).
+    #[serde(default)]
+    pub drive_history: usize,
 }
 
 impl Default for DynamicsSettings {
@@ -151,6 +155,7 @@ impl Default for DynamicsSettings {
             seed: 0,
             strain_band: 0.0,
             strain_iterations: 0,
+            drive_history: 0,
         }
     }
 }

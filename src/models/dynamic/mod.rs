@@ -42,11 +42,13 @@ impl Dynamic {
     }
 
     /// A roll-out step's inputs from its history: all of them, or with `linear_only` (see
-    /// [`Dynamic::linear_only`]) only the linear path's latents.
+    /// [`Dynamic::linear_only`]) only the linear path's latents, and `past`, the drives before
+    /// this frame that the learnt dynamics see ([`Dynamic::past_drives`]).
     pub fn step_inputs(
         &self,
         h: &motion::History,
         linear_only: bool,
+        past: tch::Tensor,
     ) -> anyhow::Result<StepInputs> {
         let encoder = self.motion()?;
         Ok(if linear_only {
@@ -56,10 +58,37 @@ impl Dynamic {
                 previous,
                 inertia,
                 drive,
+                past,
             }
         } else {
             StepInputs::Full(motion::motion_inputs(&self.space, h, &encoder.shape, None))
         })
+    }
+
+    /// The body drives of a clip's frames `[T, D]` (each frame against the one before, the
+    /// first against itself) when the learnt dynamics see past drives; `[T, 0]` otherwise.
+    pub fn clip_drives(&self, bodies: &BodyFrames, fps: f64) -> anyhow::Result<tch::Tensor> {
+        let encoder = self.motion()?;
+        let n = bodies.root.size()[0];
+        let device = bodies.root.device();
+        if encoder.past_width() == 0 {
+            return Ok(tch::Tensor::zeros([n, 0], (tch::Kind::Float, device)));
+        }
+        let previous = tch::Tensor::arange(n, (tch::Kind::Int64, device))
+            .f_sub_scalar(1)?
+            .clamp_min(0);
+        Ok(motion::drives(bodies, &previous, &encoder.shape, fps))
+    }
+
+    /// The past drives the learnt dynamics see at frame `t` of a clip, from its
+    /// [`Dynamic::clip_drives`] (`[1, 0]` when they see none).
+    pub fn past_drives(&self, drives: &tch::Tensor, t: usize) -> anyhow::Result<tch::Tensor> {
+        let encoder = self.motion()?;
+        let count = match encoder.past_width() {
+            0 => 0,
+            _ => encoder.shape.dynamics_history,
+        };
+        Ok(motion::past_drives(drives, &[t as i64], &[0], count))
     }
 
     /// The next frame's latent from its inputs (no gradients), held per dimension inside
@@ -78,7 +107,8 @@ impl Dynamic {
                 previous,
                 inertia,
                 drive,
-            } => encoder.integrate(inertia, previous, drive),
+                past,
+            } => encoder.integrate(inertia, previous, drive, past),
         });
         Ok(match range {
             Some((lo, hi)) => z.clamp_tensor(Some(lo), Some(hi)),
@@ -90,11 +120,13 @@ impl Dynamic {
 /// What a roll-out step feeds the motion encoder.
 pub enum StepInputs {
     Full(motion::MotionInputs),
-    /// The linear path's inputs alone: `Z_{t−1}`, `[Z^ball_t, Z^stay_t]` and the body drive.
+    /// The linear path's inputs alone: `Z_{t−1}`, `[Z^ball_t, Z^stay_t]` and the body drive,
+    /// and the past drives the learnt dynamics see (`motion::past_drives`; none without them).
     Linear {
         previous: tch::Tensor,
         inertia: tch::Tensor,
         drive: tch::Tensor,
+        past: tch::Tensor,
     },
 }
 

@@ -53,6 +53,15 @@ pub struct MotionShape {
     /// alone (models from before it, or trained without it).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub dynamics: Vec<usize>,
+    /// Past body drives `D` also sees, `u_{t−1} … u_{t−H}` (frames; 0: the current one alone,
+    /// models from before it): the body's recent motion, so a swing can answer an
+    /// acceleration rather than only the pose and speed of this frame.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub dynamics_history: usize,
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 impl MotionShape {
@@ -64,6 +73,7 @@ impl MotionShape {
             sigma: 0.05,
             drive_joints: Vec::new(),
             dynamics: Vec::new(),
+            dynamics_history: 0,
         }
     }
 
@@ -103,6 +113,34 @@ pub fn body_drive(before: &BodyFrames, now: &BodyFrames, shape: &MotionShape, fp
         .reshape([b, 6])
         * fps;
     Tensor::cat(&[is, spin, step, turn], 1)
+}
+
+/// The body drive of every frame of a batch of bodies `[T, D]`: frame `t` against the body at
+/// `previous[t]` (the frame before it, or itself at a clip's first frame: a body holding
+/// still).
+pub fn drives(bodies: &BodyFrames, previous: &Tensor, shape: &MotionShape, fps: f64) -> Tensor {
+    tch::no_grad(|| body_drive(&bodies.select(previous), bodies, shape, fps))
+}
+
+/// The past drives `D` sees at frames `now` (rows of `drives`, each with the first frame of its
+/// clip in `clip_first`): `[u_{t−1}, …, u_{t−count}]` `[B, count · D]`, frames before a clip's
+/// first held at it (the body still before the clip, as a roll-out from its first frame has it).
+pub fn past_drives(drives: &Tensor, now: &[i64], clip_first: &[i64], count: usize) -> Tensor {
+    let device = drives.device();
+    let rows: Vec<Tensor> = (1..=count as i64)
+        .map(|k| {
+            let idx: Vec<i64> = now
+                .iter()
+                .zip(clip_first)
+                .map(|(&t, &first)| (t - k).max(first))
+                .collect();
+            drives.index_select(0, &Tensor::from_slice(&idx).to_device(device))
+        })
+        .collect();
+    if rows.is_empty() {
+        return Tensor::zeros([now.len() as i64, 0], (Kind::Float, device));
+    }
+    Tensor::cat(&rows, 1)
 }
 
 /// Per-vertex motion channels: velocity, acceleration and rigid-follow step, 3 each.
@@ -340,7 +378,7 @@ impl MotionEncoder {
         let dynamics = (!shape.dynamics.is_empty()).then(|| {
             LearnedDynamics::new(
                 &(&root / learned::PATH),
-                3 * l + shape.drive_width(),
+                3 * l + (1 + shape.dynamics_history as i64) * shape.drive_width(),
                 &shape.dynamics,
                 l,
             )
@@ -398,28 +436,50 @@ impl MotionEncoder {
         };
         let input = Tensor::cat(&[x.static_features.shallow_clone(), e.shallow_clone()], 1);
         let h = self.encoder.forward(&input).flatten(1, -1);
-        self.integrate(&inertia, &x.previous_latent, drive) + self.encoder_fc.forward(&h)
+        // `D` is fitted only beside an idle residual (train::unroll), so none sees past drives here.
+        let past = Tensor::zeros(
+            [s[0], self.past_width()],
+            (Kind::Float, x.static_features.device()),
+        );
+        self.integrate(&inertia, &x.previous_latent, drive, &past) + self.encoder_fc.forward(&h)
     }
 
     /// The latent integrator: the linear path `W [...]` plus the learnt dynamics `D(x_t)` when
-    /// the model has them (`learned`).
-    pub fn integrate(&self, inertia: &Tensor, previous: &Tensor, drive: &Tensor) -> Tensor {
+    /// the model has them (`learned`); `past` the drives before this frame `D` sees
+    /// ([`past_drives`], [`MotionEncoder::past_width`] columns).
+    pub fn integrate(
+        &self,
+        inertia: &Tensor,
+        previous: &Tensor,
+        drive: &Tensor,
+        past: &Tensor,
+    ) -> Tensor {
         let linear = self.linear_latent(inertia, previous, drive);
         match &self.dynamics {
-            Some(d) => linear + d.forward(&LearnedDynamics::inputs(inertia, previous, drive)),
+            Some(d) => linear + d.forward(&LearnedDynamics::inputs(inertia, previous, drive, past)),
             None => linear,
         }
     }
 
-    /// Gives the encoder learnt dynamics with hidden `widths` (their output zero: the model
-    /// plays as before until `train::unroll` fits them). Replaces any it had.
-    pub fn add_dynamics(&mut self, widths: &[usize]) {
+    /// Columns of the past drives `D` sees (0 without `D` or without history).
+    pub fn past_width(&self) -> i64 {
+        match self.dynamics {
+            Some(_) => self.shape.dynamics_history as i64 * self.shape.drive_width(),
+            None => 0,
+        }
+    }
+
+    /// Gives the encoder learnt dynamics with hidden `widths` that also see `history` past
+    /// drives (their output zero: the model plays as before until `train::unroll` fits them).
+    /// Replaces any it had.
+    pub fn add_dynamics(&mut self, widths: &[usize], history: usize) {
         let l = self.linear.size()[0];
         self.shape.dynamics = widths.to_vec();
+        self.shape.dynamics_history = history;
         let root = self.vs.root() / "motion";
         self.dynamics = Some(LearnedDynamics::new(
             &(&root / learned::PATH),
-            3 * l + self.shape.drive_width(),
+            3 * l + (1 + history as i64) * self.shape.drive_width(),
             widths,
             l,
         ));
@@ -669,5 +729,20 @@ mod tests {
             body_drive(&before, &now, &MotionShape::for_space(&[4], 4), fps).size(),
             [1, 0]
         );
+    }
+
+    #[test]
+    fn past_drives_are_the_frames_before_held_at_their_clips_first() {
+        // Frame t's drive is the number t (one column); two clips starting at frames 0 and 5.
+        let drives = Tensor::arange(8, (Kind::Float, tch::Device::Cpu)).reshape([8, 1]);
+        let past = past_drives(&drives, &[3, 6, 5], &[0, 5, 5], 3);
+        let rows: Vec<Vec<f32>> = Vec::<Vec<f32>>::try_from(&past).unwrap();
+        // u_{t−1}, u_{t−2}, u_{t−3}: frame 3 sees 2, 1, 0; frame 6 sees 5 and then its clip's
+        // first frame again; a clip's first frame sees only itself.
+        assert_eq!(
+            rows,
+            vec![vec![2., 1., 0.], vec![5., 5., 5.], vec![5., 5., 5.]]
+        );
+        assert_eq!(past_drives(&drives, &[3], &[0], 0).size(), [1, 0]);
     }
 }
