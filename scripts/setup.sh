@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Idempotent set-up: Debian packages, project venv (libtorch + usd-core + ray), npm validators.
+# Idempotent set-up: Debian packages, project venv (libtorch + usd-core + alembic3d + ray), npm validators.
 # Fast when already done: every step checks before it installs.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -38,6 +38,13 @@ if [ ! -f .venv/lib/python3.11/site-packages/torch/lib/libtorch_cpu.so ] || ! .v
   .venv/bin/pip install -q --disable-pip-version-check --no-deps \
     torch==2.11.0 nvidia-cuda-runtime==13.0.96 nvidia-cuda-cupti==13.0.85
   .venv/bin/pip install -q --disable-pip-version-check usd-core==26.11 numpy
+fi
+
+# 2a. PyAlembic (PyPI `alembic3d`, one 13 MB manylinux wheel): the `.abc` point-cache writer
+#     (python_bridge/src/abc_writer.py) and tools/abc/read.py.
+if ! .venv/bin/python -c 'import alembic3d' >/dev/null 2>&1; then
+  log "pip install alembic3d==1.8.12.1"
+  .venv/bin/pip install -q --disable-pip-version-check alembic3d==1.8.12.1
 fi
 
 # 2b. Ray (PyPI `ray`, one 79 MB wheel + small pure-Python deps, ~40 s): the engine of

@@ -4,6 +4,8 @@
 //! was produced. It lives here rather than in the core crate because the core's CLI calls the
 //! exporters, and Cargo forbids the cycle; data still flows one way: model → asset → exporter → file.
 
+#[cfg(feature = "usd")]
+pub mod abc;
 pub mod asset;
 pub mod atomic;
 pub mod gltf;
@@ -27,6 +29,9 @@ pub enum ExportError {
     #[cfg(feature = "usd")]
     #[error(transparent)]
     Usd(#[from] usd::UsdError),
+    #[cfg(feature = "usd")]
+    #[error(transparent)]
+    Abc(#[from] abc::AbcError),
     #[error("cannot write {path}: {what}")]
     Unsupported { path: String, what: String },
 }
@@ -38,6 +43,8 @@ pub enum FileKind {
     Usd,
     Pc2,
     Mdd,
+    /// Alembic (`.abc`): point caches, written through the Python bridge like USD.
+    Alembic,
     Bvh,
     Obj,
     /// A garmentbake model (`.safetensors`).
@@ -46,7 +53,7 @@ pub enum FileKind {
 
 /// The one extension table: every extension, its kind, and whether garmentbake writes it
 /// (usd-core reads plain `.usd`, we write the explicit `.usda`/`.usdc`/`.usdz`).
-pub const EXTENSIONS: [(&str, FileKind, bool); 11] = [
+pub const EXTENSIONS: [(&str, FileKind, bool); 12] = [
     ("glb", FileKind::Gltf, true),
     ("gltf", FileKind::Gltf, true),
     ("usd", FileKind::Usd, false),
@@ -55,6 +62,7 @@ pub const EXTENSIONS: [(&str, FileKind, bool); 11] = [
     ("usdz", FileKind::Usd, true),
     ("pc2", FileKind::Pc2, true),
     ("mdd", FileKind::Mdd, true),
+    ("abc", FileKind::Alembic, true),
     ("bvh", FileKind::Bvh, false),
     ("obj", FileKind::Obj, true),
     ("safetensors", FileKind::Model, true),
@@ -110,30 +118,37 @@ pub fn write(asset: &BakedAsset, path: &Path) -> Result<(), ExportError> {
     }
 }
 
-/// Writes a per-frame point cache in the format its extension names: PC2, MDD, or USD (a Mesh
-/// with time-sampled points).
+/// The kinds a point cache can be written as.
+pub const POINT_CACHE_KINDS: [FileKind; 4] = [
+    FileKind::Pc2,
+    FileKind::Mdd,
+    FileKind::Usd,
+    FileKind::Alembic,
+];
+
+/// Writes a per-frame point cache in the format its extension names: PC2, MDD, USD (a Mesh
+/// with time-sampled points) or Alembic (a PolyMesh with time-sampled positions).
 pub fn write_point_cache(cache: &PointCache, path: &Path) -> Result<(), ExportError> {
     match FileKind::written(path) {
         Some(FileKind::Pc2) => Ok(pc2::write(path, cache)?),
         Some(FileKind::Mdd) => Ok(mdd::write(path, cache)?),
         Some(FileKind::Usd) => write_usd_cache(cache, path),
-        _ => Err(wrong_extension(
-            path,
-            "point-cache ",
-            &[FileKind::Pc2, FileKind::Mdd, FileKind::Usd],
-        )),
+        Some(FileKind::Alembic) => write_abc_caches(std::slice::from_ref(cache), path),
+        _ => Err(wrong_extension(path, "point-cache ", &POINT_CACHE_KINDS)),
     }
 }
 
 /// Writes several point caches of one shot (e.g. a garment and the posed body it moves on) into
-/// one USD stage, one `Mesh` each; PC2 and MDD hold a single mesh, so other extensions are refused.
+/// one USD stage or Alembic archive, one mesh each; PC2 and MDD hold a single mesh, so other
+/// extensions are refused.
 pub fn write_point_caches(caches: &[PointCache], path: &Path) -> Result<(), ExportError> {
     match FileKind::written(path) {
         Some(FileKind::Usd) => write_usd_caches(caches, path),
+        Some(FileKind::Alembic) => write_abc_caches(caches, path),
         _ => Err(wrong_extension(
             path,
             "several-mesh point-cache ",
-            &[FileKind::Usd],
+            &[FileKind::Usd, FileKind::Alembic],
         )),
     }
 }
@@ -164,6 +179,19 @@ fn write_usd_cache(cache: &PointCache, path: &Path) -> Result<(), ExportError> {
 #[cfg(feature = "usd")]
 fn write_usd_caches(caches: &[PointCache], path: &Path) -> Result<(), ExportError> {
     Ok(usd::write_point_caches(caches, path)?)
+}
+
+#[cfg(feature = "usd")]
+fn write_abc_caches(caches: &[PointCache], path: &Path) -> Result<(), ExportError> {
+    Ok(abc::write_point_caches(caches, path)?)
+}
+
+#[cfg(not(feature = "usd"))]
+fn write_abc_caches(_: &[PointCache], path: &Path) -> Result<(), ExportError> {
+    Err(unsupported(
+        path,
+        "this garmentbake was built without the Python bridge that writes Alembic (cargo feature `usd`); rebuild with default features",
+    ))
 }
 
 #[cfg(not(feature = "usd"))]

@@ -12,6 +12,8 @@ use std::path::{Path, PathBuf};
 pub enum BridgeError {
     #[error("usd-core (Python module 'pxr') is not importable from the venv {venv} ({reason}); run `bash scripts/setup.sh` to create .venv with usd-core, or set GARMENTBAKE_VENV to a venv that has it")]
     MissingPxr { venv: String, reason: String },
+    #[error("alembic3d (Python module 'alembic3d', PyAlembic) is not importable from the venv {venv} ({reason}); run `bash scripts/setup.sh` to install it in .venv, or set GARMENTBAKE_VENV to a venv that has it")]
+    MissingAlembic { venv: String, reason: String },
     #[error("Python error: {0}")]
     Python(String),
 }
@@ -174,6 +176,38 @@ fn usd_writer(py: Python<'_>) -> Result<&Bound<'_, PyModule>, BridgeError> {
         c"usd_writer.py",
         c"garmentbake_usd_writer",
     )
+}
+
+static ABC_WRITER: PyOnceLock<Py<PyModule>> = PyOnceLock::new();
+
+/// The Alembic authoring code (`abc_writer.py`), compiled once per process; a missing
+/// `alembic3d` is reported as such rather than as an ImportError inside the module.
+fn abc_writer(py: Python<'_>) -> Result<&Bound<'_, PyModule>, BridgeError> {
+    add_venv(py)?;
+    py.import("alembic3d")
+        .map_err(|e| BridgeError::MissingAlembic {
+            venv: venv_dir().map_or_else(|| "(none)".into(), |v| v.display().to_string()),
+            reason: e.to_string(),
+        })?;
+    let module = ABC_WRITER.get_or_try_init(py, || -> PyResult<_> {
+        let code = CString::new(include_str!("abc_writer.py")).expect("no NUL in embedded Python");
+        Ok(PyModule::from_code(py, &code, c"abc_writer.py", c"garmentbake_abc_writer")?.unbind())
+    })?;
+    Ok(module.bind(py))
+}
+
+/// Calls `abc_writer.write_point_caches(spec, path)` (an Ogawa archive). The caller owns
+/// atomicity (temporary name, rename).
+pub fn write_alembic(spec: &Value<'_>, path: &Path) -> Result<(), BridgeError> {
+    Python::attach(|py| {
+        let writer = abc_writer(py)?;
+        let spec = spec.to_py(py)?;
+        writer.call_method1(
+            "write_point_caches",
+            (spec, path.to_string_lossy().into_owned()),
+        )?;
+        Ok(())
+    })
 }
 
 /// A mesh prim read from a USD stage: world space, metres, Y-up, counter-clockwise faces.

@@ -407,12 +407,8 @@ impl Writes {
     }
 }
 
-/// A point cache: .pc2, .mdd or .usda/.usdc/.usdz.
-pub const POINT_CACHE: Writes = Writes::Kinds(&[
-    exporters::FileKind::Pc2,
-    exporters::FileKind::Mdd,
-    exporters::FileKind::Usd,
-]);
+/// A point cache: .pc2, .mdd, .usda/.usdc/.usdz or .abc.
+pub const POINT_CACHE: Writes = Writes::Kinds(&exporters::POINT_CACHE_KINDS);
 
 /// A picture (`--out S.png`, `--png`, `--plot-*`).
 pub const PNG: Writes = Writes::Named(&["png"]);

@@ -41,8 +41,8 @@ pub struct Args {
     #[arg(long, help_heading = "Inputs")]
     pub body: Option<PathBuf>,
     /// Output point cache of the garment, one sample per frame: .pc2 (start frame 0), .mdd
-    /// (Lightwave's, frame times f / fps), or .usda/.usdc/.usdz (a Mesh with time-sampled points
-    /// and extent).
+    /// (Lightwave's, frame times f / fps), .usda/.usdc/.usdz (a Mesh with time-sampled points
+    /// and extent) or .abc (Alembic PolyMesh, through the Python bridge).
     #[arg(long, help_heading = "Outputs")]
     pub out: PathBuf,
     /// Also write the posed body as a point cache (same formats).

@@ -39,7 +39,7 @@ pub struct Args {
     /// The two clip frames, A,B (A < B), e.g. 40,70.
     #[arg(long, value_delimiter = ',', required = true)]
     pub between: Vec<usize>,
-    /// Output point cache (.pc2, .mdd, .usda/.usdc/.usd), samples for frames A..=B.
+    /// Output point cache (.pc2, .mdd, .usda/.usdc/.usd, .abc), samples for frames A..=B.
     #[arg(long)]
     pub out: PathBuf,
     #[command(flatten)]

@@ -59,7 +59,7 @@ pub struct Args {
     /// Frames over which a later clip blends in from the previous clip's last pose.
     #[arg(long, default_value_t = 15)]
     pub fade: usize,
-    /// Output: a point cache (.pc2, .mdd, .usda/.usdc: time-sampled points), or a compressed
+    /// Output: a point cache (.pc2, .mdd, .usda/.usdc, .abc: time-sampled points), or a compressed
     /// glTF (.glb/.gltf: the garment skinned to the body's skeleton plus blend shapes from the
     /// singular directions of its un-skinned residual over the roll-out, their weights animated;
     /// plays in any glTF viewer).
@@ -78,9 +78,9 @@ pub struct Args {
     /// Also write the posed body per frame as a point cache.
     #[arg(long)]
     pub body_out: Option<PathBuf>,
-    /// USD --out: put the posed body in the same stage, beside the garment (`/NAME/garment`,
-    /// `/NAME/body`, one timeline), so the shot opens in usdview or a DCC with the body it was
-    /// rolled out on.
+    /// USD or Alembic --out: put the posed body in the same stage / archive, beside the garment
+    /// (`/NAME/garment`, `/NAME/body`, one timeline), so the shot opens in usdview or a DCC with
+    /// the body it was rolled out on.
     #[arg(long)]
     pub with_body: bool,
     /// A simulated cache of the same (single) clip to measure the roll-out against (and plain
@@ -239,7 +239,13 @@ impl Execute for Args {
 
     fn execute(&self, say: &dyn Fn(&str)) -> Result<Report> {
         use super::args::{output_set, Writes, POINT_CACHE};
-        let kinds = &[FileKind::Pc2, FileKind::Mdd, FileKind::Usd, FileKind::Gltf];
+        let kinds = &[
+            FileKind::Pc2,
+            FileKind::Mdd,
+            FileKind::Usd,
+            FileKind::Alembic,
+            FileKind::Gltf,
+        ];
         let outputs = output_set(&[
             ("--out", Some(&self.out), Writes::Kinds(kinds)),
             ("--lbs-out", self.lbs_out.as_deref(), POINT_CACHE),
@@ -247,11 +253,11 @@ impl Execute for Args {
             ("--view", self.view.as_deref(), Writes::Page),
         ])?;
         let kind = FileKind::written(&self.out);
-        if self.with_body && kind != Some(FileKind::Usd) {
+        if self.with_body && !matches!(kind, Some(FileKind::Usd | FileKind::Alembic)) {
             bail!(
-                "{}: --with-body needs a USD --out ({}): PC2, MDD and glTF caches hold one mesh (use --body-out)",
+                "{}: --with-body needs a USD or Alembic --out ({}): PC2, MDD and glTF caches hold one mesh (use --body-out)",
                 self.out.display(),
-                FileKind::extension_list(&[FileKind::Usd], true)
+                FileKind::extension_list(&[FileKind::Usd, FileKind::Alembic], true)
             );
         }
         let (file, _device) = self.compute.load_model(&self.model)?;

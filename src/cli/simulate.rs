@@ -39,7 +39,8 @@ pub struct Args {
     pub clips: ClipArgs,
     #[command(flatten)]
     pub fabric: FabricArgs,
-    /// Garment point cache, one sample per clip frame: .pc2 (start frame 0) or .usda/.usdc/.usdz.
+    /// Garment point cache, one sample per clip frame: .pc2 (start frame 0), .usda/.usdc/.usdz or
+    /// .abc (Alembic).
     #[arg(long, help_heading = "Outputs")]
     pub out: PathBuf,
     /// Also write the posed body as a point cache (same formats).
@@ -126,9 +127,13 @@ impl Execute for Args {
     fn execute(&self, say: &dyn Fn(&str)) -> Result<Report> {
         let quiet = self.output.json;
         use super::args::{output_set, Writes, POINT_CACHE};
-        use exporters::FileKind::{Pc2, Usd};
+        use exporters::FileKind::{Alembic, Pc2, Usd};
         let outputs = output_set(&[
-            ("--out", Some(&self.out), Writes::Kinds(&[Pc2, Usd])),
+            (
+                "--out",
+                Some(&self.out),
+                Writes::Kinds(&[Pc2, Usd, Alembic]),
+            ),
             ("--body-out", self.body_out.as_deref(), POINT_CACHE),
         ])?;
         let body = read_body(&self.body)?;
