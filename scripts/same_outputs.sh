@@ -105,7 +105,7 @@ def tensors(b):
         data[v["data_offsets"][0]:v["data_offsets"][1]]).hexdigest()) for k, v in sorted(h.items())})
 def unkeyed(b):
     # Keys and the build id name the binary, not what it does.
-    plan = json.loads(b); plan.pop("build", None)
+    plan = json.loads(b); plan.pop("build", None); (plan.get("tools") or {}).pop("build", None)
     for j in plan.get("jobs", []):
         j.pop("key", None)
     return json.dumps(plan, sort_keys=True)
