@@ -187,6 +187,7 @@ pub fn fit_model_dynamics(
     if let KindInfo::Dynamic(d) = &mut file.info.model {
         if let Some(m) = d.motion.as_mut() {
             m.shape.dynamics = s.widths.clone();
+            m.shape.dynamics_history = s.drive_history;
             m.dynamics = Some(fit.clone());
         }
     }

@@ -242,6 +242,9 @@ fn learnt_dynamics_play_closer_than_their_linear_base() {
             "30",
             "--unroll-frames",
             "2,3",
+            // Two past frames of the body's drive: the file must reload `D` with them.
+            "--dynamics-history",
+            "2",
         ],
     );
     let fit = &report["dynamics"];
