@@ -31,7 +31,12 @@ pub fn bar(len: u64, what: &str, hide_bar: bool) -> Progress {
     } else if !std::io::stderr().is_terminal() {
         (
             indicatif::ProgressBar::hidden(),
-            Some(Mutex::new(Plain::new(what, len, Instant::now(), first_after()))),
+            Some(Mutex::new(Plain::new(
+                what,
+                len,
+                Instant::now(),
+                first_after(),
+            ))),
         )
     } else if hide_bar {
         (indicatif::ProgressBar::hidden(), None)
