@@ -171,8 +171,9 @@ pub struct Args {
     pub dynamics_noise: f64,
     /// Stage dynamic, with --dynamics-epochs: past frames of the body's motion (root and joint
     /// rotations and their speeds, as the body drive has them) the learnt dynamics also see,
-    /// so a swing can answer the body's acceleration. 0: the current frame's alone.
-    #[arg(long, default_value_t = 0, value_name = "FRAMES")]
+    /// so a swing can answer the body's acceleration (8: 0.27 s at 30 fps, the measured recipe
+    /// of docs/dynamic.md). 0: the current frame's alone.
+    #[arg(long, default_value_t = 8, value_name = "FRAMES")]
     pub dynamics_history: usize,
     /// Stage dynamic: channels of the motion features `E_t`.
     #[arg(long, default_value_t = 16)]
