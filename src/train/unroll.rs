@@ -233,11 +233,7 @@ fn clip_firsts(data: &FrameData) -> Vec<i64> {
 /// The past drives `D` sees at frames `now` (`motion::past_drives` within their clips).
 fn past_at(encoder: &MotionEncoder, drives: &Tensor, now: &[i64], clip_first: &[i64]) -> Tensor {
     let firsts: Vec<i64> = now.iter().map(|&t| clip_first[t as usize]).collect();
-    let count = match encoder.past_width() {
-        0 => 0,
-        _ => encoder.shape.dynamics_history,
-    };
-    past_drives(drives, now, &firsts, count)
+    past_drives(drives, now, &firsts, encoder.past_frames())
 }
 
 /// `D`'s inputs on every frame's simulated history (its normalisation); `drives` every frame's
@@ -335,10 +331,6 @@ fn unroll_loss(
         |offset: i64| -> Vec<i64> { t0.iter().map(|w| (w.first + offset).max(w.clip)).collect() };
     let frames = |offset: i64| Tensor::from_slice(&at(offset)).to_device(device);
     let firsts: Vec<i64> = t0.iter().map(|w| w.clip).collect();
-    let past_count = match encoder.past_width() {
-        0 => 0,
-        _ => encoder.shape.dynamics_history,
-    };
     // The start: the simulated frames t0−1 and t0−2 projected into the space, shifted.
     let start = |offset: i64, eps: Option<&Tensor>| {
         tch::no_grad(|| {
@@ -374,7 +366,7 @@ fn unroll_loss(
         );
         // The drive of frame t against t − 1 (the clip's first frame against itself).
         let drive = drives.index_select(0, &now_idx);
-        let past = past_drives(drives, &at(step), &firsts, past_count);
+        let past = past_drives(drives, &at(step), &firsts, encoder.past_frames());
         let z = encoder
             .integrate(&inertia, &previous, &drive, &past)
             .clamp_tensor(Some(*lo), Some(*hi));

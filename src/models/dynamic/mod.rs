@@ -84,11 +84,12 @@ impl Dynamic {
     /// [`Dynamic::clip_drives`] (`[1, 0]` when they see none).
     pub fn past_drives(&self, drives: &tch::Tensor, t: usize) -> anyhow::Result<tch::Tensor> {
         let encoder = self.motion()?;
-        let count = match encoder.past_width() {
-            0 => 0,
-            _ => encoder.shape.dynamics_history,
-        };
-        Ok(motion::past_drives(drives, &[t as i64], &[0], count))
+        Ok(motion::past_drives(
+            drives,
+            &[t as i64],
+            &[0],
+            encoder.past_frames(),
+        ))
     }
 
     /// The next frame's latent from its inputs (no gradients), held per dimension inside

@@ -461,12 +461,17 @@ impl MotionEncoder {
         }
     }
 
-    /// Columns of the past drives `D` sees (0 without `D` or without history).
-    pub fn past_width(&self) -> i64 {
+    /// Past frames whose drives `D` sees (0 without `D` or without history).
+    pub fn past_frames(&self) -> usize {
         match self.dynamics {
-            Some(_) => self.shape.dynamics_history as i64 * self.shape.drive_width(),
+            Some(_) => self.shape.dynamics_history,
             None => 0,
         }
+    }
+
+    /// Columns of the past drives `D` sees.
+    pub fn past_width(&self) -> i64 {
+        self.past_frames() as i64 * self.shape.drive_width()
     }
 
     /// Gives the encoder learnt dynamics with hidden `widths` that also see `history` past
