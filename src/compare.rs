@@ -474,3 +474,140 @@ fn hem_chart(r: &Report, traces: &[(String, Vec<f64>)], runs: usize) -> image::R
     );
     stack(&[traces, spectrum])
 }
+
+/// The report for a person: the simulations' spread, each cache's RMS and own error, e(k), the
+/// hem, plausibility, and the plots written.
+impl std::fmt::Display for Report {
+    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        let r = self;
+        let s = &r.spread;
+        writeln!(
+            f,
+            "{} simulations, {} frames at {} fps: σ {:.1} mm over the clip ({:.1} over the first 50 frames); two runs {:.1} mm RMS apart; a run from the others' mean {:.1} mm",
+            s.runs, r.frames, r.fps, s.sigma_mm.clip, s.sigma_mm.first_50, s.pairwise_rms_mm.clip, s.from_the_others_rms_mm.clip
+        )?;
+        writeln!(f, "RMS vertex error, mm (first 50 frames / whole clip); own = √(RMS² − σ²): a re-run scores σ, the runs' mean 0")?;
+        writeln!(
+            f,
+            "  {:<12} {:>15} {:>15} {:>15}",
+            "cache", "RMS", "own b", "vs mean garment"
+        )?;
+        let pair = |a: f64, b: f64| format!("{a:.1} / {b:.1}");
+        for c in &r.caches {
+            let sc = &c.score;
+            writeln!(
+                f,
+                "  {:<12} {:>15} {:>15} {:>15}",
+                c.name,
+                pair(sc.rms_mm.first_50, sc.rms_mm.clip),
+                pair(sc.own_mm.first_50, sc.own_mm.clip),
+                pair(sc.versus_mean_rms_mm.first_50, sc.versus_mean_rms_mm.clip)
+            )?;
+        }
+        let at = |v: &[f64]| {
+            [1usize, 10, 25, 50]
+                .iter()
+                .filter(|&&k| k <= v.len())
+                .map(|&k| format!("{:.1}", v[k - 1]))
+                .collect::<Vec<_>>()
+                .join(" / ")
+        };
+        writeln!(
+            f,
+            "error k = 1 / 10 / 25 / 50 frames after a restart (RMS mm, {} starts × {} runs):",
+            r.starts.len(),
+            s.runs
+        )?;
+        let d = &r.divergence;
+        writeln!(
+            f,
+            "  simulations from a common start (frame 0, {:.1} mm apart): {}",
+            d.start_mm,
+            at(&d.from_the_start_mm)
+        )?;
+        writeln!(
+            f,
+            "  two runs at the same frames (√2 σ): {}; σ: {}",
+            at(&d.pairwise_mm),
+            at(&d.sigma_mm)
+        )?;
+        for c in &r.caches {
+            writeln!(
+                f,
+                "  {}{}: {}",
+                c.name,
+                if c.restarted { " (restarted)" } else { "" },
+                at(&c.horizon_mm)
+            )?;
+        }
+        let h = &r.hem;
+        let opt = |v: Option<f64>| v.map_or("—".to_string(), |x| format!("{x:.2}"));
+        let lag = |l: &Option<crate::metrics::hem::Lag>| {
+            l.map_or("—".to_string(), |l| {
+                format!("{:+.2} s ({:+.2})", l.seconds, l.correlation)
+            })
+        };
+        writeln!(
+            f,
+            "hem ({} vertices) in the waist frame beyond {}: the runs' swing {:.1} mm RMS, mutual correlation {} (each against the others' mean {}), lag behind the pelvis {}",
+            h.vertices,
+            h.baseline.as_deref().unwrap_or("nothing (no --baseline)"),
+            h.amplitude_mm,
+            opt(h.mutual_correlation),
+            opt(h.correlation_with_the_others),
+            h.runs.iter().map(|s| lag(&s.lag)).collect::<Vec<_>>().join(", ")
+        )?;
+        let spectrum = |s: &crate::metrics::hem::SpectrumSummary| {
+            format!(
+                "peak {:.2} Hz, centroid {:.2} Hz, {:.0} % above 1 Hz",
+                s.peak_hz, s.centroid_hz, s.above_1hz_pct
+            )
+        };
+        if let Some(first) = h.runs.first() {
+            writeln!(
+                f,
+                "  the runs' spectrum (run 0): {}",
+                spectrum(&first.spectrum)
+            )?;
+        }
+        for c in &r.caches {
+            let m = &c.hem;
+            writeln!(
+                f,
+                "  {:<12} correlation with the runs' mean {}, with each {}, amplitude ratio {:.2}, lag {}, {}",
+                c.name,
+                opt(m.correlation_with_mean),
+                opt(m.correlation_with_each),
+                m.amplitude_ratio,
+                lag(&m.swing.lag),
+                spectrum(&m.swing.spectrum)
+            )?;
+        }
+        writeln!(
+            f,
+            "plausibility: strain mean / p99 %, inside the body %, jitter mm"
+        )?;
+        let p = &r.simulations;
+        writeln!(
+            f,
+            "  {:<12} {:.2} / {:.2}, {:.3}, {:.2}",
+            "simulations",
+            p.strain_mean_pct,
+            p.strain_p99_pct,
+            r.simulations_inside_pct,
+            p.jitter_mm
+        )?;
+        for c in &r.caches {
+            let p = &c.plausibility;
+            writeln!(
+                f,
+                "  {:<12} {:.2} / {:.2}, {:.3}, {:.2}",
+                c.name, p.strain_mean_pct, p.strain_p99_pct, c.inside_pct, p.jitter_mm
+            )?;
+        }
+        for path in [&r.horizon_png, &r.hem_png].into_iter().flatten() {
+            writeln!(f, "wrote {}", path.display())?;
+        }
+        Ok(())
+    }
+}

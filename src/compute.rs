@@ -21,6 +21,31 @@ pub fn parse_device(s: &str) -> Result<Device> {
     Ok(device)
 }
 
+/// Where a step's tensors run, as given (`--device`, `--threads`): applied when the step starts
+/// its tensor work, so that its earlier checks fail first.
+#[derive(Clone, Debug)]
+pub struct Compute {
+    /// `cpu`, `cuda` or `cuda:N`.
+    pub device: String,
+    /// CPU threads (torch and rayon).
+    pub threads: usize,
+}
+
+impl Compute {
+    pub fn new(device: &str, threads: usize) -> Compute {
+        Compute {
+            device: device.to_string(),
+            threads,
+        }
+    }
+
+    /// Sets the thread pools, then parses the device.
+    pub fn apply(&self) -> Result<Device> {
+        set_threads(self.threads, self.threads);
+        parse_device(&self.device)
+    }
+}
+
 /// Thread budget: torch and rayon (nearest-neighbour queries, metrics) pools.
 pub fn set_threads(torch: usize, rayon: usize) {
     tch::set_num_threads(torch.max(1) as i32);

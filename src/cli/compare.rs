@@ -1,15 +1,14 @@
 //! `garmentbake compare`: caches of one clip against perturbed simulations of it, measured so
-//! that dynamics show (library: src/compare.rs).
+//! that dynamics show (library: src/pipeline/compare.rs, src/compare.rs).
 
 use super::args::{output_set, ClipArgs, CollisionFixArgs, ComputeArgs, OutputArgs, PNG};
 use super::Execute;
-use crate::compare::{compare, Cache, Inputs, Report, Settings};
-use crate::garment::Garment;
-use crate::io::gltf_body::read_body;
-use crate::io::point_cache::read_pc2;
-use crate::models::file::check_skeleton;
-use anyhow::{bail, Context, Result};
-use std::path::{Path, PathBuf};
+use crate::compare::{Report, Settings};
+use crate::compute::Compute;
+use crate::pipeline::compare::{run, Request};
+use crate::pipeline::Clips;
+use anyhow::{bail, Result};
+use std::path::PathBuf;
 
 /// Compare garment caches of one clip (a dynamic roll-out, PBNS, plain LBS, another simulation)
 /// against three or more perturbed simulations of it (`simulate --perturb 0/1/2`).
@@ -84,9 +83,11 @@ pub struct Args {
 }
 
 /// `NAME=PATH` of `flag`.
-fn named<'a>(flag: &str, text: &'a str) -> Result<(&'a str, &'a Path)> {
+fn named(flag: &str, text: &str) -> Result<(String, PathBuf)> {
     match text.split_once('=') {
-        Some((name, path)) if !name.is_empty() && !path.is_empty() => Ok((name, Path::new(path))),
+        Some((name, path)) if !name.is_empty() && !path.is_empty() => {
+            Ok((name.to_string(), PathBuf::from(path)))
+        }
         _ => bail!("{flag} {text}: give NAME=PATH"),
     }
 }
@@ -100,261 +101,40 @@ impl Execute for Args {
             ("--plot-horizon", self.plot_horizon.as_deref(), PNG),
             ("--plot-hem", self.plot_hem.as_deref(), PNG),
         ])?;
-        if self.sims.len() < 2 {
-            bail!(
-                "--sim: give two or more simulations of the clip (got {}; e.g. simulate --perturb 0, 1, 2)",
-                self.sims.len()
-            );
-        }
-        if self.restart_every == 0 {
-            bail!("--restart-every 0: give a number of frames of 1 or more");
-        }
-        if !(self.max_lag.is_finite() && self.max_lag >= 0.0) {
-            bail!(
-                "--max-lag {}: give a non-negative number of seconds",
-                self.max_lag
-            );
-        }
-        let names: Vec<(&str, &Path)> = self
-            .caches
-            .iter()
-            .map(|c| named("--cache", c))
-            .collect::<Result<_>>()?;
-        for (i, (name, _)) in names.iter().enumerate() {
-            if self.with_mean && *name == crate::compare::RUNS_MEAN {
-                bail!("--cache {name}=…: the name --with-mean gives the runs' mean garment");
-            }
-            if names[..i].iter().any(|(n, _)| n == name) {
-                bail!("--cache {name}=…: the name is given twice");
-            }
-        }
-        let index_of = |flag: &str, name: &str| {
-            names
+        let c = &self.clips;
+        let request = Request {
+            body: self.body.clone(),
+            garment: self.garment.clone(),
+            clips: Clips::new(&c.motions, &c.maps, c.fps, c.up, c.units),
+            sims: self.sims.clone(),
+            caches: self
+                .caches
                 .iter()
-                .position(|(n, _)| *n == name)
-                .with_context(|| format!("{flag} {name}: no --cache of that name"))
+                .map(|c| named("--cache", c))
+                .collect::<Result<_>>()?,
+            models: self
+                .models
+                .iter()
+                .map(|m| named("--model", m))
+                .collect::<Result<_>>()?,
+            baseline: self.baseline.clone(),
+            frames: self.frames,
+            compute: Compute::new(&self.compute.device, self.compute.threads),
+            settings: Settings {
+                horizon: self.horizon,
+                restart_every: self.restart_every,
+                max_lag_s: self.max_lag,
+                with_mean: self.with_mean,
+                rollout: self.collision.settings(!self.no_collision_fix)?,
+                horizon_png: self.plot_horizon.clone(),
+                hem_png: self.plot_hem.clone(),
+                quiet: self.output.json,
+            },
         };
-        let baseline = self
-            .baseline
-            .as_deref()
-            .map(|b| index_of("--baseline", b))
-            .transpose()?;
-        let models: Vec<(usize, &Path)> = self
-            .models
-            .iter()
-            .map(|m| {
-                let (name, path) = named("--model", m)?;
-                Ok((index_of("--model", name)?, path))
-            })
-            .collect::<Result<_>>()?;
-        let body = read_body(&self.body)?;
-        let garment = Garment::read(&self.garment)?;
-        let n = garment.mesh.vertex_count();
-        let (motion, clip) = self.clips.load_single(&body.skeleton)?;
-        let fps = clip.animation.fps;
-        let clip_frames = clip.animation.frame_count();
-        let played = self.frames.unwrap_or(clip_frames);
-        if played < 2 || played > clip_frames {
-            bail!("--frames {played}: give 2 to {clip_frames} (the clip's frames at {fps} fps)");
-        }
-        let poses: Vec<_> = (0..played).map(|f| clip.animation.local_pose(f)).collect();
-        let read = |path: &Path| {
-            let mut frames = read_pc2(path, n)?;
-            if frames.len() != clip_frames && frames.len() != played {
-                bail!(
-                    "{}: {} frames, {} has {clip_frames} at {fps} fps (another clip or rate?)",
-                    path.display(),
-                    frames.len(),
-                    motion.display(),
-                );
-            }
-            frames.truncate(played);
-            Ok(frames)
-        };
-        let sims = self
-            .sims
-            .iter()
-            .map(|p| read(p))
-            .collect::<Result<Vec<_>>>()?;
-        let mut caches = names
-            .iter()
-            .map(|&(name, path)| {
-                Ok(Cache {
-                    name: name.to_string(),
-                    frames: read(path)?,
-                    model: None,
-                })
-            })
-            .collect::<Result<Vec<_>>>()?;
-        for (i, path) in models {
-            let (file, _) = self.compute.load_model(path)?;
-            file.dynamic()
-                .and_then(|d| d.motion().map(|_| ()))
-                .with_context(|| {
-                    format!(
-                        "{}: not a dynamic model with its motion stage",
-                        path.display()
-                    )
-                })?;
-            check_skeleton(
-                file.skeleton(),
-                &body.skeleton,
-                &self.body.display().to_string(),
-            )?;
-            if file.garment.vertex_count() != n {
-                bail!(
-                    "{}: the model's garment has {} vertices, {} has {n}",
-                    path.display(),
-                    file.garment.vertex_count(),
-                    self.garment.display()
-                );
-            }
-            if (file.info.dynamic()?.fps - fps).abs() > 1e-3 {
-                bail!(
-                    "{}: the model plays at {} fps, the clip is at {fps} (give --fps {})",
-                    path.display(),
-                    file.info.dynamic()?.fps,
-                    file.info.dynamic()?.fps
-                );
-            }
-            caches[i].model = Some(file);
-        }
-        self.compute.apply()?;
-        let settings = Settings {
-            horizon: self.horizon,
-            restart_every: self.restart_every,
-            max_lag_s: self.max_lag,
-            with_mean: self.with_mean,
-            rollout: self.collision.settings(!self.no_collision_fix)?,
-            horizon_png: self.plot_horizon.clone(),
-            hem_png: self.plot_hem.clone(),
-            quiet: self.output.json,
-        };
-        let inputs = Inputs {
-            body: &body,
-            garment: &garment.mesh,
-            poses: &poses,
-            fps,
-            simulations: &sims,
-            caches: &caches,
-            baseline,
-        };
-        compare(&inputs, &settings)
+        run(&request)
     }
 
     fn print(r: &Report) {
-        let s = &r.spread;
-        println!(
-            "{} simulations, {} frames at {} fps: σ {:.1} mm over the clip ({:.1} over the first 50 frames); two runs {:.1} mm RMS apart; a run from the others' mean {:.1} mm",
-            s.runs, r.frames, r.fps, s.sigma_mm.clip, s.sigma_mm.first_50, s.pairwise_rms_mm.clip, s.from_the_others_rms_mm.clip
-        );
-        println!("RMS vertex error, mm (first 50 frames / whole clip); own = √(RMS² − σ²): a re-run scores σ, the runs' mean 0");
-        println!(
-            "  {:<12} {:>15} {:>15} {:>15}",
-            "cache", "RMS", "own b", "vs mean garment"
-        );
-        let pair = |a: f64, b: f64| format!("{a:.1} / {b:.1}");
-        for c in &r.caches {
-            let sc = &c.score;
-            println!(
-                "  {:<12} {:>15} {:>15} {:>15}",
-                c.name,
-                pair(sc.rms_mm.first_50, sc.rms_mm.clip),
-                pair(sc.own_mm.first_50, sc.own_mm.clip),
-                pair(sc.versus_mean_rms_mm.first_50, sc.versus_mean_rms_mm.clip)
-            );
-        }
-        let at = |v: &[f64]| {
-            [1usize, 10, 25, 50]
-                .iter()
-                .filter(|&&k| k <= v.len())
-                .map(|&k| format!("{:.1}", v[k - 1]))
-                .collect::<Vec<_>>()
-                .join(" / ")
-        };
-        println!(
-            "error k = 1 / 10 / 25 / 50 frames after a restart (RMS mm, {} starts × {} runs):",
-            r.starts.len(),
-            s.runs
-        );
-        let d = &r.divergence;
-        println!(
-            "  simulations from a common start (frame 0, {:.1} mm apart): {}",
-            d.start_mm,
-            at(&d.from_the_start_mm)
-        );
-        println!(
-            "  two runs at the same frames (√2 σ): {}; σ: {}",
-            at(&d.pairwise_mm),
-            at(&d.sigma_mm)
-        );
-        for c in &r.caches {
-            println!(
-                "  {}{}: {}",
-                c.name,
-                if c.restarted { " (restarted)" } else { "" },
-                at(&c.horizon_mm)
-            );
-        }
-        let h = &r.hem;
-        let opt = |v: Option<f64>| v.map_or("—".to_string(), |x| format!("{x:.2}"));
-        let lag = |l: &Option<crate::metrics::hem::Lag>| {
-            l.map_or("—".to_string(), |l| {
-                format!("{:+.2} s ({:+.2})", l.seconds, l.correlation)
-            })
-        };
-        println!(
-            "hem ({} vertices) in the waist frame beyond {}: the runs' swing {:.1} mm RMS, mutual correlation {} (each against the others' mean {}), lag behind the pelvis {}",
-            h.vertices,
-            h.baseline.as_deref().unwrap_or("nothing (no --baseline)"),
-            h.amplitude_mm,
-            opt(h.mutual_correlation),
-            opt(h.correlation_with_the_others),
-            h.runs.iter().map(|s| lag(&s.lag)).collect::<Vec<_>>().join(", ")
-        );
-        let spectrum = |s: &crate::metrics::hem::SpectrumSummary| {
-            format!(
-                "peak {:.2} Hz, centroid {:.2} Hz, {:.0} % above 1 Hz",
-                s.peak_hz, s.centroid_hz, s.above_1hz_pct
-            )
-        };
-        if let Some(first) = h.runs.first() {
-            println!(
-                "  the runs' spectrum (run 0): {}",
-                spectrum(&first.spectrum)
-            );
-        }
-        for c in &r.caches {
-            let m = &c.hem;
-            println!(
-                "  {:<12} correlation with the runs' mean {}, with each {}, amplitude ratio {:.2}, lag {}, {}",
-                c.name,
-                opt(m.correlation_with_mean),
-                opt(m.correlation_with_each),
-                m.amplitude_ratio,
-                lag(&m.swing.lag),
-                spectrum(&m.swing.spectrum)
-            );
-        }
-        println!("plausibility: strain mean / p99 %, inside the body %, jitter mm");
-        let p = &r.simulations;
-        println!(
-            "  {:<12} {:.2} / {:.2}, {:.3}, {:.2}",
-            "simulations",
-            p.strain_mean_pct,
-            p.strain_p99_pct,
-            r.simulations_inside_pct,
-            p.jitter_mm
-        );
-        for c in &r.caches {
-            let p = &c.plausibility;
-            println!(
-                "  {:<12} {:.2} / {:.2}, {:.3}, {:.2}",
-                c.name, p.strain_mean_pct, p.strain_p99_pct, c.inside_pct, p.jitter_mm
-            );
-        }
-        for path in [&r.horizon_png, &r.hem_png].into_iter().flatten() {
-            println!("wrote {}", path.display());
-        }
+        print!("{r}");
     }
 }
