@@ -24,12 +24,12 @@ use serde::{Deserialize, Serialize};
 use std::fmt::{self, Display, Formatter};
 use std::path::PathBuf;
 
-/// Which stage to train.
+/// Which stage to train: the generative space of garment deformations (first), or the motion
+/// encoder on the frozen space of `from` (second). The variants carry no doc comments: clap
+/// would list them in `--help`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Stage {
-    /// The generative space of garment deformations (first).
     Space,
-    /// The motion encoder on the frozen space of `from` (second).
     Dynamic,
 }
 
