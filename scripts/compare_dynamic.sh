@@ -7,6 +7,7 @@
 #
 #   bash scripts/compare_dynamic.sh CLIP OUT_PREFIX NAME=MODEL.safetensors [NAME=MODEL ...]
 #   e.g. bash scripts/compare_dynamic.sh 002_04 runs/cmp_002_04 linear=runs/dyn/linear.safetensors
+#   NAME=eval:MODEL plays a PBNS or a swing (train-swing) with `eval` instead of `rollout`.
 #
 # CLIP is 131_02 (samples/motions) or a take of ../shared/data/mocap/cc_base; runs are read from
 # runs/dynamic_set/CLIP_skirt_sim_p{0,1,2}.pc2 and PBNS from runs/dynamic_set/CLIP_pbns.pc2.
@@ -23,9 +24,20 @@ esac
 ARGS=()
 for spec in "$@"; do
     name=${spec%%=*} model=${spec#*=}
-    "$GB" rollout --model "$model" --motion "$BVH" --init "$D/${CLIP}_skirt_sim_p0.pc2" \
-        --out "${OUT}_$name.pc2" --quiet > "${OUT}_$name.txt"
-    ARGS+=(--cache "$name=${OUT}_$name.pc2" --model "$name=$model")
+    case $model in
+    eval:*)
+        # A PBNS (with or without a swing) has no state to restart from: played from the clip's
+        # first frame by `eval`, as the PBNS baseline is.
+        "$GB" eval --model "${model#eval:}" --motion "$BVH" --fps 30 --out "${OUT}_$name.pc2" \
+            --quiet > "${OUT}_$name.txt"
+        ARGS+=(--cache "$name=${OUT}_$name.pc2")
+        ;;
+    *)
+        "$GB" rollout --model "$model" --motion "$BVH" --init "$D/${CLIP}_skirt_sim_p0.pc2" \
+            --out "${OUT}_$name.pc2" --quiet > "${OUT}_$name.txt"
+        ARGS+=(--cache "$name=${OUT}_$name.pc2" --model "$name=$model")
+        ;;
+    esac
 done
 "$GB" compare --body samples/body.glb --garment samples/garments/skirt.obj --motion "$BVH" --fps 30 \
     --sim "$D/${CLIP}_skirt_sim_p0.pc2" --sim "$D/${CLIP}_skirt_sim_p1.pc2" --sim "$D/${CLIP}_skirt_sim_p2.pc2" \

@@ -68,17 +68,17 @@ fn clip_coefficients(
         .collect();
     let batch = network.batch(skeleton, &poses, device);
     let x = predict_chunks(poses.len(), |s, n| {
-        network.coefficients(&batch.slice(s, n).features)
+        network.blend_weights(&batch.slice(s, n))
     });
     let x: Vec<f32> = flat(&x, Kind::Float);
-    x.chunks_exact(network.shape.width)
+    x.chunks_exact(network.blend_shape_count())
         .map(<[f32]>::to_vec)
         .collect()
 }
 
-/// The network's PSD basis `D` as K offset sets.
+/// The network's blend shapes (the PSD basis `D`, and a swing's `E`) as offset sets.
 fn basis(network: &Pbns) -> Vec<Vec<[f32; 3]>> {
-    let d: Vec<f32> = flat(&network.psd, Kind::Float);
+    let d: Vec<f32> = flat(&network.blend_shapes(), Kind::Float);
     let n = network.shape.vertices;
     d.chunks_exact(3 * n)
         .map(|c| c.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect())

@@ -116,10 +116,20 @@ impl ClipArgs {
         &self,
         skeleton: &crate::rig::Skeleton,
     ) -> Result<(&Path, crate::rig::retarget::Retargeted)> {
+        self.load_single_at(skeleton, self.fps)
+    }
+
+    /// [`ClipArgs::load_single`] at the rate `fps` (a model's own rate: see
+    /// [`crate::models::swing::clip_rate`]).
+    pub fn load_single_at(
+        &self,
+        skeleton: &crate::rig::Skeleton,
+        fps: Option<f32>,
+    ) -> Result<(&Path, crate::rig::retarget::Retargeted)> {
         let motion = self.single()?;
         Ok((
             motion,
-            crate::motion::load_clip(motion, &self.reader()?, skeleton, self.fps)?,
+            crate::motion::load_clip(motion, &self.reader()?, skeleton, fps)?,
         ))
     }
 

@@ -147,11 +147,12 @@ impl Execute for Args {
         ])?;
         let (model, device) = self.compute.load_model(&self.model)?;
         let maps = self.clips.reader()?;
+        let fps = crate::models::swing::clip_rate(model.pbns()?, self.clips.fps)?;
         let clips = self
             .clips
             .motions
             .iter()
-            .map(|p| load_clip(p, &maps, model.skeleton(), self.clips.fps).map(|c| c.animation))
+            .map(|p| load_clip(p, &maps, model.skeleton(), fps).map(|c| c.animation))
             .collect::<Result<Vec<_>>>()?;
         let targets = match (self.max_targets, self.tolerance_mm) {
             (Some(0), _) => bail!("--max-targets must be at least 1"),

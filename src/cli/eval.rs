@@ -173,7 +173,8 @@ impl Execute for Args {
             }
             None => model.body.clone(),
         };
-        let (motion, clip) = self.clips.load_single(&body.skeleton)?;
+        let fps = crate::models::swing::clip_rate(model.pbns()?, self.clips.fps)?;
+        let (motion, clip) = self.clips.load_single_at(&body.skeleton, fps)?;
         let anim = &clip.animation;
         let poses: Vec<_> = (0..anim.frame_count())
             .map(|f| anim.local_pose(f))

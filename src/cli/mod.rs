@@ -15,6 +15,7 @@ pub mod rollout;
 pub mod simulate;
 pub mod train;
 pub mod train_dynamic;
+pub mod train_swing;
 pub mod upgrade;
 pub mod validate;
 pub mod view;
@@ -23,9 +24,8 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 use serde::Serialize;
 
-/// A command as a library call: `execute` does the work and returns a report (serde), `print`
-/// shows it to a person; `--json` prints the report instead. `batch` does not call it: each job
-/// runs as a child `garmentbake` process (src/batch/run.rs) whose `--json` report is read back.
+/// A command: `execute` does the work and returns a report (serde), `print` shows it; `--json` prints
+/// the report instead. `batch` runs each job as a child process (src/batch/run.rs), reading `--json`.
 pub trait Execute {
     type Report: Serialize;
     /// Runs the command; `say` gets progress notes for a person (a no-op with `--json`).
@@ -82,6 +82,7 @@ enum Command {
     Bake(bake::Args),
     Simulate(simulate::Args),
     TrainDynamic(Box<train_dynamic::Args>),
+    TrainSwing(Box<train_swing::Args>),
     Rollout(rollout::Args),
     Compare(compare::Args),
     Interpolate(interpolate::Args),
@@ -115,6 +116,7 @@ pub fn main() -> i32 {
         Command::Bake(a) => run(&a, a.output.json),
         Command::Simulate(a) => run(&a, a.output.json),
         Command::TrainDynamic(a) => run(a.as_ref(), a.output.json),
+        Command::TrainSwing(a) => run(a.as_ref(), a.output.json),
         Command::Rollout(a) => run(&a, a.output.json),
         Command::Compare(a) => run(&a, a.output.json),
         Command::Interpolate(a) => run(&a, a.output.json),

@@ -106,7 +106,8 @@ impl Args {
             up: None,
             units: None,
         };
-        let (_, clip) = clips.load_single(model.skeleton())?;
+        let fps = crate::models::swing::clip_rate(model.pbns()?, self.fps)?;
+        let (_, clip) = clips.load_single_at(model.skeleton(), fps)?;
         Ok(Some(Reference::of(&model, &clip.animation, device)?))
     }
 }

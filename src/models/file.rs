@@ -20,6 +20,7 @@ use super::coverage::Coverage;
 use super::dynamic::space::Consts;
 use super::dynamic::{Dynamic, MotionEncoder, MotionShape, Seeds, Space, SpaceShape, UvRaster};
 use super::pbns::{flat, Pbns, PbnsShape};
+use super::swing::{Swing, SwingShape};
 use super::{Model, ModelKind};
 use crate::body::Body;
 use crate::fabric::Fabric;
@@ -243,6 +244,46 @@ pub struct PbnsInfo {
     pub feature_joints: Vec<usize>,
     pub training: TrainingInfo,
     pub history: Vec<EpochRecord>,
+    /// The swing learnt on top (`train-swing`), when there is one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub swing: Option<SwingInfo>,
+}
+
+/// A swing's sizes, training settings and per-epoch history.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SwingInfo {
+    pub shape: SwingShape,
+    pub training: SwingTraining,
+    pub history: Vec<SwingEpoch>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SwingTraining {
+    pub seed: u64,
+    pub epochs: usize,
+    /// Sequences per step and frames unrolled in each.
+    pub batch: usize,
+    pub unroll: usize,
+    pub learning_rate: f64,
+    /// Weight of the inertia term (1: the physical `Σ m/(2Δt²)|x_t − 2x_{t−1} + x_{t−2}|²`).
+    pub inertia: f32,
+    /// Clip file names and their frames at the swing's rate.
+    pub motions: Vec<String>,
+    pub frames: usize,
+}
+
+/// One epoch of a swing's training (means over its steps).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SwingEpoch {
+    pub epoch: usize,
+    pub loss: f64,
+    pub terms: LossTerms,
+    pub inertia: f64,
+    /// Fraction of garment vertices nearer than the margin inside the body (candidate proxy).
+    pub collided: f64,
+    /// RMS of the swing's displacement over the training frames (mm), after the epoch.
+    pub swing_rms_mm: f64,
+    pub seconds: f64,
 }
 
 impl GarmentInfo {
@@ -546,6 +587,7 @@ fn pbns_blobs(m: &Pbns) -> Vec<(String, Blob)> {
     let mut blobs: Vec<(String, Blob)> = m
         .parameters(true)
         .into_iter()
+        .chain(m.swing.iter().flat_map(|s| s.tensors()))
         .map(|(name, t)| (name, Blob::float(t)))
         .collect();
     blobs.push(("W.joints".into(), Blob::int(&m.joints)));
@@ -733,7 +775,7 @@ pub fn load(path: &Path, device: Device) -> Result<ModelFile> {
 }
 
 fn is_pbns_tensor(name: &str) -> bool {
-    name.starts_with("mlp.") || name.starts_with("W.") || name == "psd"
+    name.starts_with("mlp.") || name.starts_with("W.") || name == "psd" || name.starts_with("swing.")
 }
 
 /// The generative space from its tensors: the network rebuilt from the description (seeds,
@@ -816,7 +858,30 @@ fn load_pbns(t: &Tensors, info: &PbnsInfo) -> Result<Pbns> {
         joints: t.shaped("W.joints", &[n, k])?.to_kind(Kind::Int64),
         logits: t.shaped("W.logits", &[n, k])?,
         clamp: None,
+        swing: info.swing.as_ref().map(|s| load_swing(t, s)).transpose()?,
     })
+}
+
+/// A swing's network from its tensors, checked against its description.
+fn load_swing(t: &Tensors, info: &SwingInfo) -> Result<Swing> {
+    let shape = info.shape.clone();
+    let mut mlp = Vec::new();
+    for i in 0..=shape.layers {
+        mlp.push((
+            t.get(&format!("swing.mlp.{i}.weight"))?,
+            t.get(&format!("swing.mlp.{i}.bias"))?,
+        ));
+    }
+    let m = shape.motion_inputs();
+    let swing = Swing {
+        basis: t.shaped("swing.basis", &[shape.shapes, 3 * shape.vertices])?,
+        input_mean: t.shaped("swing.input_mean", &[m])?,
+        input_scale: t.shaped("swing.input_scale", &[m])?,
+        mlp,
+        shape,
+    };
+    swing.check().map_err(|e| t.fail(e.to_string()))?;
+    Ok(swing)
 }
 
 fn read_bytes(path: &Path) -> Result<Vec<u8>> {

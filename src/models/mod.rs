@@ -8,6 +8,7 @@ pub mod file;
 pub mod pbns;
 pub mod pose_features;
 pub mod sparse_skin;
+pub mod swing;
 
 pub use pbns::{Pbns, PbnsShape};
 use serde::{Deserialize, Serialize};

@@ -8,6 +8,7 @@
 
 use super::pose_features::PoseBatch;
 use super::sparse_skin;
+use super::swing::{self, Swing};
 use crate::rig::{JointTransform, Skeleton, Skin};
 use tch::{Device, Kind, Tensor};
 
@@ -50,6 +51,9 @@ pub struct Pbns {
     /// Clamped correctives: the blend-shape weights kept within `(lowest, highest)` `[K]` each
     /// (the range over the training poses), as engine ML deformers do on unseen poses.
     pub clamp: Option<(Tensor, Tensor)>,
+    /// A learnt dynamic response (`train-swing`): more blend shapes whose weights follow the
+    /// motion; `None` for the quasi-static PBNS.
+    pub swing: Option<Swing>,
 }
 
 /// What the forward pass returns: posed vertices and the rest-space PSD displacement (which the
@@ -94,6 +98,7 @@ impl Pbns {
             joints: Tensor::from_slice(&joints).view([n, k]).to_device(device),
             logits: Tensor::from_slice(&logits).view([n, k]).to_device(device),
             clamp: None,
+            swing: None,
         }
     }
 
@@ -151,6 +156,8 @@ impl Pbns {
                 .clamp
                 .as_ref()
                 .map(|(lo, hi)| (lo.shallow_clone(), hi.shallow_clone())),
+            // Snapshots are of a PBNS being trained, which has no swing yet.
+            swing: None,
         }
     }
 
@@ -169,14 +176,47 @@ impl Pbns {
         self.logits.softmax(-1, Kind::Float)
     }
 
-    /// The inputs for `poses`: this model's pose features and the skinning matrices.
+    /// The inputs for `poses`: this model's pose features and the skinning matrices; with a
+    /// swing, `poses` are one clip's frames in order at the swing's rate, played from rest.
     pub fn batch(
         &self,
         skeleton: &Skeleton,
         poses: &[Vec<JointTransform>],
         device: Device,
     ) -> PoseBatch {
-        PoseBatch::new(skeleton, &self.feature_joints, poses, device)
+        let mut batch = PoseBatch::new(skeleton, &self.feature_joints, poses, device);
+        if let Some(s) = &self.swing {
+            let motion = swing::motion_inputs(skeleton, poses, &s.shape);
+            let motion = Tensor::from_slice(&motion)
+                .view([poses.len() as i64, s.shape.motion_inputs() as i64])
+                .to_device(device);
+            batch.swing = Some(s.play(&motion, &batch.features));
+        }
+        batch
+    }
+
+    /// Blend-shape weights of a batch, `[B, K (+ S)]`: the MLP output `X(θ)` and, with a swing,
+    /// its weights (a baked clip's weight track before compression).
+    pub fn blend_weights(&self, batch: &PoseBatch) -> Tensor {
+        let x = self.coefficients(&batch.features);
+        match (&self.swing, &batch.swing) {
+            (Some(_), Some(y)) => Tensor::cat(&[&x, y], 1),
+            (Some(_), None) => panic!("a swing model's batch needs its clip played in order"),
+            (None, _) => x,
+        }
+    }
+
+    /// All blend shapes `[K (+ S), N·3]`: the PSD basis, then the swing's.
+    pub fn blend_shapes(&self) -> Tensor {
+        match &self.swing {
+            Some(s) => Tensor::cat(&[&self.psd, &s.basis], 0),
+            None => self.psd.shallow_clone(),
+        }
+    }
+
+    /// Blend shapes the model plays (K, plus S with a swing).
+    pub fn blend_shape_count(&self) -> usize {
+        self.shape.width + self.swing.as_ref().map_or(0, |s| s.shape.shapes)
     }
 
     /// The MLP output `X(θ)`, `[B, K]`: the weights of the PSD basis (a baked clip's
@@ -201,11 +241,17 @@ impl Pbns {
         ));
     }
 
-    /// `X(θ)·D` in rest space, `[B, N, 3]`.
-    pub fn displacement(&self, features: &Tensor) -> Tensor {
-        self.coefficients(features)
+    /// `X(θ)·D (+ Y·E)` in rest space, `[B, N, 3]`.
+    pub fn displacement(&self, batch: &PoseBatch) -> Tensor {
+        let d = self
+            .coefficients(&batch.features)
             .matmul(&self.psd)
-            .view([-1, self.shape.vertices as i64, 3])
+            .view([-1, self.shape.vertices as i64, 3]);
+        match (&self.swing, &batch.swing) {
+            (Some(s), Some(y)) => d + s.displacement(y),
+            (Some(_), None) => panic!("a swing model's batch needs its clip played in order"),
+            (None, _) => d,
+        }
     }
 
     /// Linear blend skinning of rest points `[B, N, 3]` with skinning matrices `[B, J, 12]`.
@@ -233,7 +279,7 @@ impl Pbns {
             if self.psd.device() != Device::Cpu {
                 return self.forward(&batch).vertices;
             }
-            let rest = self.template.unsqueeze(0) + self.displacement(&batch.features);
+            let rest = self.template.unsqueeze(0) + self.displacement(&batch);
             let rest_points: Vec<f32> = flat(&rest, Kind::Float);
             let skinning: Vec<f32> = flat(&batch.skinning, Kind::Float);
             let x = sparse_skin::skin(&rest_points, &skinning, self.shape.joints, &self.slots());
@@ -276,7 +322,7 @@ impl Pbns {
     }
 
     pub fn forward(&self, batch: &PoseBatch) -> Output {
-        let displacement = self.displacement(&batch.features);
+        let displacement = self.displacement(batch);
         let rest = self.template.unsqueeze(0) + &displacement;
         Output {
             vertices: self.skin_points(&rest, &batch.skinning),

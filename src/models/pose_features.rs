@@ -53,10 +53,12 @@ pub fn skinning_rows(skeleton: &Skeleton, local: &[JointTransform]) -> Vec<f32> 
 }
 
 /// The two tensors a model needs for a batch of poses: features `[B, F]` and skinning matrices
-/// `[B, J, 12]`.
+/// `[B, J, 12]`; for a model that swings, the swing weights of the poses played in order `[B, S]`
+/// (see [`crate::models::swing`]).
 pub struct PoseBatch {
     pub features: Tensor,
     pub skinning: Tensor,
+    pub swing: Option<Tensor>,
 }
 
 impl PoseBatch {
@@ -83,6 +85,7 @@ impl PoseBatch {
             skinning: Tensor::from_slice(&skinning)
                 .view([b, skeleton.joint_count() as i64, 12])
                 .to_device(device),
+            swing: None,
         }
     }
 
@@ -91,6 +94,7 @@ impl PoseBatch {
         PoseBatch {
             features: self.features.index_select(0, index),
             skinning: self.skinning.index_select(0, index),
+            swing: self.swing.as_ref().map(|s| s.index_select(0, index)),
         }
     }
 
@@ -107,6 +111,10 @@ impl PoseBatch {
         PoseBatch {
             features: self.features.narrow(0, start as i64, len as i64),
             skinning: self.skinning.narrow(0, start as i64, len as i64),
+            swing: self
+                .swing
+                .as_ref()
+                .map(|s| s.narrow(0, start as i64, len as i64)),
         }
     }
 }

@@ -118,6 +118,17 @@ impl Cloth {
         (energy, metric)
     }
 
+    /// `Σ m_i/(2Δt²)·|x − 2·last + before|²` (J): the inertia of an implicit Euler step of
+    /// `Δt` seconds from the two frames before (what makes a garment lag, swing and settle).
+    pub fn inertia(&self, x: &Tensor, last: &Tensor, before: &Tensor, dt: f64) -> Tensor {
+        let a = x - last * 2.0 + before;
+        a.square()
+            .sum_dim_intlist(-1, false, Kind::Float)
+            .matmul(&self.mass)
+            .mean(Kind::Float)
+            / (2.0 * dt * dt)
+    }
+
     /// `Σ |D_i|²` over the pinned vertices (rest-space displacement).
     pub fn pin(&self, displacement: &Tensor) -> Tensor {
         if self.pinned.numel() == 0 {

@@ -10,6 +10,7 @@ pub mod motion;
 pub mod nearest;
 pub mod pbns;
 pub mod poses;
+pub mod swing;
 pub mod unroll;
 
 use anyhow::{Context, Result};

@@ -747,7 +747,7 @@ impl Trainer {
         let model = self.model();
         let fabric = &self.file.info.fabric;
         let poses = batch.len();
-        let displacement = model.displacement(&batch.features);
+        let displacement = model.displacement(batch);
         let template: Vec<f32> = flat(&model.template, Kind::Float);
         let d: Vec<f32> = flat(&displacement, Kind::Float);
         let rest: Vec<f32> = d
@@ -1235,6 +1235,7 @@ fn describe(
                 best_epoch: None,
             },
             history: Vec::new(),
+            swing: None,
         }),
     }
 }

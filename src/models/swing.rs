@@ -1,0 +1,347 @@
+//! A PBNS that swings: dynamic blend-shape weights learnt from physics alone.
+//!
+//! The quasi-static PBNS gives `T + X(θ_t)·D`; the swing adds `Y_t·E`, a second blend-shape set
+//! `E` (`[S, N·3]`) whose weights come from a small MLP over the motion history (the root's linear
+//! and angular velocity in the root's frame, the garment joints' angular velocities, a few frames
+//! back, and the gravity direction), the pose features and the swing's own last two weights
+//! `Y_{t−1}, Y_{t−2}`. Over a clip played in order the weights are a recurrence from rest
+//! (`Y = 0`), so a baked clip is the same skin, the blend shapes `[D; E]` and one weight track:
+//! no runtime beyond blend shapes. The frame rate is part of the model (the recurrence is a time
+//! step); clips are played at that rate.
+
+use crate::rig::{JointTransform, Skeleton};
+use anyhow::{bail, Result};
+use nalgebra::{UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
+use tch::{Device, Kind, Tensor};
+
+/// Sizes and inputs of the swing network.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SwingShape {
+    /// Frames back at which the motion history is sampled (0: the current frame).
+    pub lags: Vec<usize>,
+    /// Joints whose local angular velocities are inputs (the PBNS feature joints).
+    pub joints: Vec<usize>,
+    /// Pose features of the PBNS network (its MLP inputs), also inputs here.
+    pub pose_features: usize,
+    /// Hidden width and count of hidden ReLU layers.
+    pub width: usize,
+    pub layers: usize,
+    /// Swing blend shapes `S`.
+    pub shapes: usize,
+    pub vertices: usize,
+    /// The rate the recurrence steps at (frames per second).
+    pub fps: f32,
+}
+
+impl SwingShape {
+    /// Motion-history inputs per frame: per lag the root's velocity and angular velocity and
+    /// each joint's angular velocity (3 each), then the gravity direction.
+    pub fn motion_inputs(&self) -> usize {
+        self.lags.len() * (6 + 3 * self.joints.len()) + 3
+    }
+
+    /// All network inputs: motion history, pose features, the last two swing weights.
+    pub fn inputs(&self) -> usize {
+        self.motion_inputs() + self.pose_features + 2 * self.shapes
+    }
+}
+
+pub struct Swing {
+    pub shape: SwingShape,
+    /// `(weight [in, out], bias [out])`: hidden ReLU layers, then a linear layer to `S`.
+    pub mlp: Vec<(Tensor, Tensor)>,
+    /// Swing blend shapes `E` `[S, N·3]` (rest space, as PBNS's `D`).
+    pub basis: Tensor,
+    /// Normalisation of the motion inputs (from the training frames) `[M]`.
+    pub input_mean: Tensor,
+    pub input_scale: Tensor,
+}
+
+/// Which gravity the rig lives in (glTF bodies are Y-up).
+const DOWN: [f32; 3] = [0.0, -1.0, 0.0];
+
+impl Swing {
+    /// A fresh network: hidden layers initialised like PyTorch's `Linear`, the last layer and
+    /// the basis small, so the untrained swing is (nearly) the quasi-static PBNS.
+    pub fn new(
+        shape: SwingShape,
+        input_mean: Tensor,
+        input_scale: Tensor,
+        device: Device,
+    ) -> Swing {
+        let opts = (Kind::Float, device);
+        let mut mlp = Vec::new();
+        let mut fan_in = shape.inputs();
+        for layer in 0..=shape.layers {
+            let last = layer == shape.layers;
+            let out = if last { shape.shapes } else { shape.width };
+            let bound = 1.0 / (fan_in as f64).sqrt() * if last { 0.1 } else { 1.0 };
+            let w = Tensor::zeros([fan_in as i64, out as i64], opts).uniform_(-bound, bound);
+            let b = Tensor::zeros([out as i64], opts);
+            mlp.push((w, b));
+            fan_in = out;
+        }
+        // One centimetre per unit weight spread over the garment: the weights start near 1.
+        let scale = 0.01 / (shape.vertices as f64).sqrt();
+        let basis = Tensor::randn([shape.shapes as i64, 3 * shape.vertices as i64], opts) * scale;
+        Swing {
+            shape,
+            mlp,
+            basis,
+            input_mean,
+            input_scale,
+        }
+    }
+
+    /// The trainable tensors with their file names.
+    pub fn parameters(&self) -> Vec<(String, &Tensor)> {
+        let mut out = Vec::new();
+        for (i, (w, b)) in self.mlp.iter().enumerate() {
+            out.push((format!("swing.mlp.{i}.weight"), w));
+            out.push((format!("swing.mlp.{i}.bias"), b));
+        }
+        out.push(("swing.basis".to_string(), &self.basis));
+        out
+    }
+
+    /// Every tensor the file stores (parameters and the input normalisation).
+    pub fn tensors(&self) -> Vec<(String, &Tensor)> {
+        let mut out = self.parameters();
+        out.push(("swing.input_mean".to_string(), &self.input_mean));
+        out.push(("swing.input_scale".to_string(), &self.input_scale));
+        out
+    }
+
+    pub fn set_trainable(&mut self) {
+        for (w, b) in &mut self.mlp {
+            *w = w.set_requires_grad(true);
+            *b = b.set_requires_grad(true);
+        }
+        self.basis = self.basis.set_requires_grad(true);
+    }
+
+    /// Normalised motion inputs `[F, M]` from raw ones.
+    pub fn normalise(&self, motion: &Tensor) -> Tensor {
+        (motion - &self.input_mean) / &self.input_scale
+    }
+
+    /// One step for a batch: `motion` normalised `[B, M]`, `pose` `[B, P]`, the last two swing
+    /// weights `[B, S]` each → the new weights `[B, S]`.
+    pub fn step(&self, motion: &Tensor, pose: &Tensor, last: &Tensor, before: &Tensor) -> Tensor {
+        let mut x = Tensor::cat(&[motion, pose, last, before], 1);
+        let n = self.mlp.len();
+        for (i, (w, b)) in self.mlp.iter().enumerate() {
+            x = b.addmm(&x, w);
+            if i + 1 < n {
+                x = x.relu();
+            }
+        }
+        x
+    }
+
+    /// The swing weights of one clip played in order from rest, `[F, S]`, without gradients:
+    /// `motion` raw `[F, M]`, `pose` `[F, P]`.
+    pub fn play(&self, motion: &Tensor, pose: &Tensor) -> Tensor {
+        tch::no_grad(|| {
+            let frames = motion.size()[0];
+            let motion = self.normalise(motion);
+            let zero = Tensor::zeros(
+                [1, self.shape.shapes as i64],
+                (Kind::Float, motion.device()),
+            );
+            let (mut last, mut before) = (zero.shallow_clone(), zero.shallow_clone());
+            let mut out = Vec::with_capacity(frames as usize);
+            for f in 0..frames {
+                let y = self.step(
+                    &motion.narrow(0, f, 1),
+                    &pose.narrow(0, f, 1),
+                    &last,
+                    &before,
+                );
+                before = last;
+                last = y.shallow_clone();
+                out.push(y);
+            }
+            if out.is_empty() {
+                return zero.narrow(0, 0, 0);
+            }
+            Tensor::cat(&out, 0)
+        })
+    }
+
+    /// The swing's displacement `Y·E` in rest space `[B, N, 3]`.
+    pub fn displacement(&self, weights: &Tensor) -> Tensor {
+        weights
+            .matmul(&self.basis)
+            .view([-1, self.shape.vertices as i64, 3])
+    }
+
+    /// Checks a loaded network against its shape.
+    pub fn check(&self) -> Result<()> {
+        let s = &self.shape;
+        if self.mlp.len() != s.layers + 1 {
+            bail!(
+                "swing: {} layers stored, {} described",
+                self.mlp.len(),
+                s.layers + 1
+            );
+        }
+        if self.mlp[0].0.size() != [s.inputs() as i64, self.mlp[0].0.size()[1]] {
+            bail!(
+                "swing: first layer takes {:?}, the description needs {} inputs",
+                self.mlp[0].0.size(),
+                s.inputs()
+            );
+        }
+        if self.basis.size() != [s.shapes as i64, 3 * s.vertices as i64] {
+            bail!(
+                "swing: basis {:?} does not match {} shapes",
+                self.basis.size(),
+                s.shapes
+            );
+        }
+        Ok(())
+    }
+}
+
+/// The motion-history inputs of a clip's frames played in order at `shape.fps`, `[F × M]` raw
+/// (metres, radians, seconds). Frames before the first repeat it: the clip starts from rest.
+pub fn motion_inputs(
+    skeleton: &Skeleton,
+    poses: &[Vec<JointTransform>],
+    shape: &SwingShape,
+) -> Vec<f32> {
+    let root = (0..skeleton.joint_count())
+        .find(|&j| skeleton.parents[j].is_none())
+        .unwrap_or(0);
+    let fps = shape.fps;
+    let mut out = Vec::with_capacity(poses.len() * shape.motion_inputs());
+    let rot = |f: usize, j: usize| poses[f][j].rotation;
+    for t in 0..poses.len() {
+        let to_root = rot(t, root).inverse();
+        for &lag in &shape.lags {
+            let s = t.saturating_sub(lag);
+            let r = s.saturating_sub(1);
+            let v = to_root * (poses[s][root].translation - poses[r][root].translation) * fps;
+            // Angular velocity: the turn from r to s in r's frame, carried into t's root frame.
+            let turn = scaled_axis(&(rot(r, root).inverse() * rot(s, root)));
+            let w = to_root * (rot(r, root) * turn) * fps;
+            out.extend([v.x, v.y, v.z, w.x, w.y, w.z]);
+            for &j in &shape.joints {
+                let a = scaled_axis(&(rot(r, j).inverse() * rot(s, j))) * fps;
+                out.extend([a.x, a.y, a.z]);
+            }
+        }
+        let g = to_root * Vector3::from(DOWN);
+        out.extend([g.x, g.y, g.z]);
+    }
+    out
+}
+
+/// The rate a model's clips are played at: a swing steps at its own rate, so a clip is
+/// resampled to it (an `--fps` that differs is an error); other models take `fps` as given.
+pub fn clip_rate(network: &super::Pbns, fps: Option<f32>) -> Result<Option<f32>> {
+    let Some(s) = &network.swing else {
+        return Ok(fps);
+    };
+    match fps {
+        Some(f) if (f - s.shape.fps).abs() > 1e-3 => bail!(
+            "--fps {f}: this model swings at {} fps (its time step); leave --fps out or give {}",
+            s.shape.fps,
+            s.shape.fps
+        ),
+        _ => Ok(Some(s.shape.fps)),
+    }
+}
+
+fn scaled_axis(q: &UnitQuaternion<f32>) -> Vector3<f32> {
+    q.scaled_axis()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn two_joint() -> Skeleton {
+        let names: Vec<String> = ["root", "leg"].iter().map(|s| s.to_string()).collect();
+        Skeleton::from_world_positions(&names, &[None, Some(0)], &[Vector3::zeros(), -Vector3::y()])
+            .unwrap()
+    }
+
+    fn shape(lags: Vec<usize>) -> SwingShape {
+        SwingShape {
+            lags,
+            joints: vec![1],
+            pose_features: 6,
+            width: 8,
+            layers: 1,
+            shapes: 2,
+            vertices: 3,
+            fps: 30.0,
+        }
+    }
+
+    /// A root walking +x at 1.5 m/s while turned 90° about y reads as moving along its own −z
+    /// (the root's frame), at every lag once the lag is inside the clip; the first frame is at rest.
+    #[test]
+    fn root_velocity_is_read_in_the_roots_frame_and_the_clip_starts_at_rest() {
+        let s = two_joint();
+        let turn = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), std::f32::consts::FRAC_PI_2);
+        let poses: Vec<Vec<JointTransform>> = (0..5)
+            .map(|f| {
+                let mut root =
+                    JointTransform::from_translation(Vector3::new(0.05 * f as f32, 1.0, 0.0));
+                root.rotation = turn;
+                vec![root, JointTransform::from_translation(-Vector3::y())]
+            })
+            .collect();
+        let shape = shape(vec![0, 2]);
+        let m = motion_inputs(&s, &poses, &shape);
+        let per = shape.motion_inputs();
+        assert_eq!(m.len(), 5 * per);
+        assert!(
+            m[..6].iter().all(|v| v.abs() < 1e-6),
+            "frame 0 moves: {:?}",
+            &m[..6]
+        );
+        let f4 = &m[4 * per..5 * per];
+        for lag in 0..2 {
+            let v = &f4[lag * 9..lag * 9 + 3];
+            assert!(
+                (v[0]).abs() < 1e-5 && (v[2] - 1.5).abs() < 1e-4,
+                "lag {lag}: {v:?}"
+            );
+        }
+        // Gravity in the root's frame: still down (the turn is about the vertical).
+        assert!((f4[per - 2] + 1.0).abs() < 1e-6);
+    }
+
+    /// The recurrence feeds its own output back: with the motion and pose fixed, a network
+    /// whose only nonzero weight copies `Y_{t−1}` plus a constant counts frames.
+    #[test]
+    fn play_feeds_the_last_weights_back() {
+        let shape = SwingShape {
+            layers: 0,
+            shapes: 1,
+            ..shape(vec![0])
+        };
+        let m = shape.motion_inputs() as i64;
+        let mut swing = Swing::new(
+            shape.clone(),
+            Tensor::zeros([m], (Kind::Float, Device::Cpu)),
+            Tensor::ones([m], (Kind::Float, Device::Cpu)),
+            Device::Cpu,
+        );
+        let inputs = shape.inputs() as i64;
+        let w = Tensor::zeros([inputs, 1], (Kind::Float, Device::Cpu));
+        let _ = w.get(m + 6).fill_(1.0); // Y_{t−1}
+        swing.mlp = vec![(w, Tensor::from_slice(&[1.0f32]))];
+        let y = swing.play(
+            &Tensor::zeros([4, m], (Kind::Float, Device::Cpu)),
+            &Tensor::zeros([4, 6], (Kind::Float, Device::Cpu)),
+        );
+        let y: Vec<f32> = Vec::try_from(y.view([-1])).unwrap();
+        assert_eq!(y, [1.0, 2.0, 3.0, 4.0]);
+    }
+}

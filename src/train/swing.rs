@@ -1,0 +1,624 @@
+//! Training a swing on a trained PBNS, from physics alone: the quasi-static part stays frozen
+//! and the swing's weights minimise, frame after frame, the incremental potential of an implicit
+//! Euler step — the PBNS potential plus inertia `Σ m_i/(2Δt²)·|x_t − 2x_{t−1} + x_{t−2}|²`.
+//!
+//! The earlier frames come from the model itself: every training frame keeps the swing weights
+//! the model last gave it (a whole pass over each clip in order at every epoch, and each step's
+//! own output written back), and a step unrolls a few frames from those. The past is detached:
+//! each frame's loss trains the step from the state it was given, as a time integrator is
+//! judged, not a trajectory bent to make later frames cheaper.
+
+use super::adam::Adam;
+use super::losses::{self, Cloth};
+use super::nearest::{self, Correspondences};
+use super::poses::{shuffle, Rng};
+use super::{Blowup, Training};
+use crate::models::file::{KindInfo, LossTerms, ModelFile, SwingEpoch, SwingInfo, SwingTraining};
+use crate::models::pbns::flat;
+use crate::models::pose_features::{tensor_points, PER_JOINT};
+use crate::models::swing::{self, Swing, SwingShape};
+use crate::models::{Model, Pbns, PREDICT_CHUNK};
+use crate::rig::SkelAnimation;
+use anyhow::{bail, Context, Result};
+use serde::Serialize;
+use std::ops::Range;
+use std::path::Path;
+use std::time::Instant;
+use tch::{Device, Kind, Tensor};
+
+/// Training settings (the CLI's options).
+#[derive(Clone, Debug)]
+pub struct Settings {
+    pub epochs: usize,
+    /// Sequences per step.
+    pub batch: usize,
+    /// Frames unrolled per sequence.
+    pub unroll: usize,
+    pub learning_rate: f64,
+    pub width: usize,
+    pub layers: usize,
+    pub shapes: usize,
+    pub lags: Vec<usize>,
+    pub fps: f32,
+    /// Weight of the inertia term (1: physical; 0 turns the dynamics off, for ablations).
+    pub inertia: f32,
+    pub seed: u64,
+    /// Candidate body vertices per garment vertex, and epochs between their refreshes.
+    pub candidates: usize,
+    pub refresh_every: usize,
+    /// Body vertices farther than this from the garment at rest are never nearest (metres).
+    pub reach: f32,
+    pub device: Device,
+}
+
+impl Settings {
+    /// The documented recipe (docs/swing.md).
+    pub fn recipe() -> Settings {
+        Settings {
+            epochs: 20,
+            batch: 16,
+            unroll: 3,
+            learning_rate: 1e-3,
+            width: 128,
+            layers: 2,
+            shapes: 32,
+            lags: vec![0, 1, 2, 4, 8],
+            fps: 30.0,
+            inertia: 1.0,
+            seed: 0,
+            candidates: 6,
+            refresh_every: 2,
+            reach: 0.3,
+            device: Device::Cpu,
+        }
+    }
+}
+
+/// The clips a swing learns from (already retargeted and at `Settings::fps`).
+pub struct Inputs {
+    /// A trained PBNS (its network stays as it is).
+    pub model: ModelFile,
+    pub clips: Vec<SkelAnimation>,
+    pub motion_names: Vec<String>,
+}
+
+impl Inputs {
+    /// The clips retargeted onto the model's skeleton at `fps`.
+    pub fn read(
+        model: ModelFile,
+        motions: &[std::path::PathBuf],
+        reader: &crate::motion::ClipReader,
+        fps: f32,
+    ) -> Result<Inputs> {
+        let mut clips = Vec::new();
+        let mut motion_names = Vec::new();
+        for m in motions {
+            clips.push(crate::motion::load_clip(m, reader, model.skeleton(), Some(fps))?.animation);
+            motion_names.push(
+                m.file_name()
+                    .map_or(String::new(), |n| n.to_string_lossy().into_owned()),
+            );
+        }
+        Ok(Inputs {
+            model,
+            clips,
+            motion_names,
+        })
+    }
+}
+
+pub struct Trainer {
+    pub settings: Settings,
+    file: ModelFile,
+    cloth: Cloth,
+    /// Every training frame of every clip, concatenated: pose features `[G, P]`, skinning
+    /// `[G, J, 12]`, the quasi-static rest garment `T + X·D` `[G, N, 3]`, raw motion inputs `[G, M]`.
+    features: Tensor,
+    skinning: Tensor,
+    rest: Tensor,
+    motion: Tensor,
+    /// Each clip's frames in the concatenation.
+    clips: Vec<Range<usize>>,
+    /// Frames a sequence may start at (two earlier frames and the unroll inside its clip).
+    starts: Vec<usize>,
+    /// The swing weights the model last gave every frame `[G, S]`.
+    states: Tensor,
+    correspondences: Correspondences,
+    adam: Adam,
+    rng: Rng,
+    dt: f64,
+}
+
+/// One epoch as logged.
+#[derive(Clone, Debug, Serialize)]
+pub struct EpochLine {
+    #[serde(flatten)]
+    pub record: SwingEpoch,
+    pub learning_rate: f64,
+}
+
+impl Trainer {
+    pub fn new(inputs: Inputs, settings: Settings) -> Result<Trainer> {
+        if settings.batch == 0 || settings.unroll == 0 || settings.shapes == 0 {
+            bail!("--batch, --unroll and --shapes must be positive");
+        }
+        if settings.fps <= 0.0 {
+            bail!("--fps must be positive");
+        }
+        tch::manual_seed(settings.seed as i64);
+        let Inputs {
+            mut model,
+            clips,
+            motion_names,
+        } = inputs;
+        let device = settings.device;
+        let network = match &mut model.model {
+            Model::Pbns(p) => p,
+            Model::Dynamic(_) => bail!("train-swing starts from a PBNS model (garmentbake train), not a simulation-trained dynamic one"),
+        };
+        if network.swing.is_some() {
+            bail!("this PBNS already swings; start from the quasi-static model it was trained on");
+        }
+        let skeleton = model.body.skeleton.clone();
+        let shape = SwingShape {
+            lags: settings.lags.clone(),
+            joints: network.feature_joints.clone(),
+            pose_features: PER_JOINT * network.feature_joints.len(),
+            width: settings.width,
+            layers: settings.layers,
+            shapes: settings.shapes,
+            vertices: network.shape.vertices,
+            fps: settings.fps,
+        };
+        let mut ranges = Vec::new();
+        let mut locals = Vec::new();
+        let mut motion = Vec::new();
+        for clip in &clips {
+            let poses: Vec<_> = (0..clip.frame_count())
+                .map(|f| clip.local_pose(f))
+                .collect();
+            motion.extend(swing::motion_inputs(&skeleton, &poses, &shape));
+            ranges.push(locals.len()..locals.len() + poses.len());
+            locals.extend(poses);
+        }
+        let starts: Vec<usize> = ranges
+            .iter()
+            .flat_map(|r| r.start + 2..(r.end + 1).saturating_sub(settings.unroll).max(r.start + 2))
+            .collect();
+        if starts.is_empty() {
+            bail!(
+                "the clips are too short: a sequence needs {} frames",
+                settings.unroll + 2
+            );
+        }
+        let frames = locals.len() as i64;
+        let m = shape.motion_inputs() as i64;
+        let motion = Tensor::from_slice(&motion)
+            .view([frames, m])
+            .to_device(device);
+        let mean = motion.mean_dim(0, false, Kind::Float);
+        // A constant input (a lag no clip reaches, a joint that never turns) is left unscaled.
+        let scale = motion.std_dim(0, false, false).clamp_min(1e-3);
+        let batch = network.batch(&skeleton, &locals, device);
+        let rest = super::super::models::predict_chunks(locals.len(), |s, n| {
+            network.template.unsqueeze(0) + network.displacement(&batch.slice(s, n))
+        });
+        let mut swing = Swing::new(shape.clone(), mean, scale, device);
+        swing.basis = pose_modes(&rest, &network.template, settings.shapes);
+        swing.set_trainable();
+        let adam = Adam::new(&swing.parameters());
+        let fabric = model.info.fabric.clone();
+        let pinned = model.info.garment.pinned.clone();
+        let cloth = Cloth::new(&model.garment, &fabric, &pinned, device)?;
+        let subset = nearest::body_subset(&model.body, &model.garment.positions, settings.reach);
+        let mut correspondences = Correspondences::new(
+            &model.body,
+            &subset,
+            &locals,
+            settings.candidates,
+            network.shape.vertices,
+            device,
+        );
+        let static_points = tensor_points(&super::super::models::predict_chunks(
+            locals.len(),
+            |s, n| {
+                network.skin_points(
+                    &rest.narrow(0, s as i64, n as i64),
+                    &batch.skinning.narrow(0, s as i64, n as i64),
+                )
+            },
+        ));
+        let per_frame: Vec<Vec<[f32; 3]>> = static_points
+            .chunks_exact(network.shape.vertices)
+            .map(<[_]>::to_vec)
+            .collect();
+        correspondences.refresh(&per_frame);
+        let states = Tensor::zeros([frames, settings.shapes as i64], (Kind::Float, device));
+        let info = SwingInfo {
+            shape,
+            training: SwingTraining {
+                seed: settings.seed,
+                epochs: 0,
+                batch: settings.batch,
+                unroll: settings.unroll,
+                learning_rate: settings.learning_rate,
+                inertia: settings.inertia,
+                motions: motion_names,
+                frames: locals.len(),
+            },
+            history: Vec::new(),
+        };
+        network.swing = Some(swing);
+        match &mut model.info.model {
+            KindInfo::Pbns(p) => p.swing = Some(info),
+            KindInfo::Dynamic(_) => unreachable!("checked above"),
+        }
+        model.extra.clear();
+        Ok(Trainer {
+            dt: 1.0 / settings.fps as f64,
+            rng: Rng::new(settings.seed),
+            settings,
+            file: model,
+            cloth,
+            features: batch.features,
+            skinning: batch.skinning,
+            rest,
+            motion,
+            clips: ranges,
+            starts,
+            states,
+            correspondences,
+            adam,
+        })
+    }
+
+    fn network(&self) -> &Pbns {
+        match &self.file.model {
+            Model::Pbns(p) => p,
+            Model::Dynamic(_) => unreachable!("a swing trainer holds a PBNS"),
+        }
+    }
+
+    fn swing(&self) -> &Swing {
+        self.network()
+            .swing
+            .as_ref()
+            .expect("the trainer installed a swing")
+    }
+
+    fn info_mut(&mut self) -> &mut SwingInfo {
+        match &mut self.file.info.model {
+            KindInfo::Pbns(p) => p.swing.as_mut().expect("installed"),
+            KindInfo::Dynamic(_) => unreachable!("a swing trainer holds a PBNS"),
+        }
+    }
+
+    pub fn info(&self) -> &SwingInfo {
+        match &self.file.info.model {
+            KindInfo::Pbns(p) => p.swing.as_ref().expect("installed"),
+            KindInfo::Dynamic(_) => unreachable!("a swing trainer holds a PBNS"),
+        }
+    }
+
+    /// Training frames (at the swing's rate) and the frames a sequence can start at.
+    pub fn frames(&self) -> (usize, usize) {
+        (self.states.size()[0] as usize, self.starts.len())
+    }
+
+    /// Steps per epoch: every start frame's unrolled sequence once, on average.
+    pub fn steps_per_epoch(&self) -> usize {
+        self.starts
+            .len()
+            .div_ceil(self.settings.batch * self.settings.unroll)
+            .max(1)
+    }
+
+    /// The garment for frames `idx` `[B]` with swing weights `y` `[B, S]`, and its rest-space
+    /// displacement from the template (what pinning holds).
+    fn garment(&self, idx: &Tensor, y: &Tensor) -> (Tensor, Tensor) {
+        let network = self.network();
+        let rest = self.rest.index_select(0, idx) + self.swing().displacement(y);
+        let x = network.skin_points(&rest, &self.skinning.index_select(0, idx));
+        (x, rest - network.template.unsqueeze(0))
+    }
+
+    /// Plays every clip in order with the current network: the states the next steps start from.
+    fn replay(&mut self) {
+        let parts: Vec<Tensor> = self
+            .clips
+            .iter()
+            .map(|r| {
+                let (s, n) = (r.start as i64, (r.end - r.start) as i64);
+                self.swing()
+                    .play(&self.motion.narrow(0, s, n), &self.features.narrow(0, s, n))
+            })
+            .collect();
+        self.states = Tensor::cat(&parts, 0);
+    }
+
+    /// New candidate lists from the current garment of every frame.
+    fn refresh(&mut self) {
+        let frames = self.states.size()[0] as usize;
+        let x = super::super::models::predict_chunks(frames, |s, n| {
+            let idx = Tensor::arange_start(
+                s as i64,
+                (s + n) as i64,
+                (Kind::Int64, self.settings.device),
+            );
+            self.garment(&idx, &self.states.index_select(0, &idx)).0
+        });
+        let v = self.network().shape.vertices;
+        let per_frame: Vec<Vec<[f32; 3]>> = tensor_points(&x)
+            .chunks_exact(v)
+            .map(<[_]>::to_vec)
+            .collect();
+        self.correspondences.refresh(&per_frame);
+    }
+
+    /// One step on the sequences starting at `starts`: returns the weighted terms (edge, bend,
+    /// collision, gravity, pin, inertia) and the collided fraction, means over the unroll.
+    fn step(&mut self, starts: &[usize], lr: f64) -> Result<[f64; 7], Blowup> {
+        let device = self.settings.device;
+        let fabric = self.file.info.fabric.clone();
+        let at = |offset: i64| {
+            let v: Vec<i64> = starts.iter().map(|&s| s as i64 + offset).collect();
+            Tensor::from_slice(&v).to_device(device)
+        };
+        let (mut last, mut before) = (
+            self.states.index_select(0, &at(-1)),
+            self.states.index_select(0, &at(-2)),
+        );
+        let (mut x_last, mut x_before) = tch::no_grad(|| {
+            (
+                self.garment(&at(-1), &last).0,
+                self.garment(&at(-2), &before).0,
+            )
+        });
+        let mut total = Tensor::zeros([], (Kind::Float, device));
+        let mut values = [0.0f64; 7];
+        let unroll = self.settings.unroll;
+        let mut outputs = Vec::with_capacity(unroll);
+        for k in 0..unroll as i64 {
+            let idx = at(k);
+            let swing = self.swing();
+            let motion = swing.normalise(&self.motion.index_select(0, &idx));
+            let y = swing.step(
+                &motion,
+                &self.features.index_select(0, &idx),
+                &last,
+                &before,
+            );
+            let (x, displacement) = self.garment(&idx, &y);
+            let (body_points, body_normals) = self.correspondences.resolve(&idx, &x);
+            let potential = |x: &Tensor, displacement: &Tensor| {
+                losses::potential(
+                    &self.cloth,
+                    &fabric,
+                    x,
+                    displacement,
+                    &body_points,
+                    &body_normals,
+                )
+            };
+            let terms = potential(&x, &displacement);
+            // The PBNS garment is the rest state: its own residual force (what the quasi-static
+            // network left unbalanced) is taken out, so the swing learns the motion's response
+            // and not a correction of the pose's garment.
+            let still = self.garment(&idx, &y.zeros_like().detach());
+            let x_still = still.0.detach().set_requires_grad(true);
+            let residual = &Tensor::run_backward(
+                &[&potential(&x_still, &still.1.detach()).total()],
+                &[&x_still],
+                false,
+                false,
+            )[0];
+            let balance = (residual * (&x - x_still.detach())).sum(Kind::Float);
+            let inertia =
+                self.cloth.inertia(&x, &x_last, &x_before, self.dt) * self.settings.inertia as f64;
+            total = total + terms.total() - balance + &inertia;
+            let mut scalars: Vec<Tensor> = terms.weighted.iter().map(Tensor::detach).collect();
+            scalars.push(inertia.detach());
+            scalars.push(terms.metrics[2].shallow_clone());
+            let v: Vec<f64> = flat(&Tensor::stack(&scalars, 0), Kind::Double);
+            for (a, b) in values.iter_mut().zip(v) {
+                *a += b / unroll as f64;
+            }
+            before = last;
+            last = y.detach();
+            x_before = x_last;
+            x_last = x.detach();
+            outputs.push((idx, last.shallow_clone()));
+        }
+        let names = ["edge", "bend", "collision", "gravity", "pin", "inertia"];
+        let named: Vec<(&'static str, f64)> = names.into_iter().zip(values).collect();
+        let step = self.adam.step as usize + 1;
+        Blowup::check(&named, self.info().history.len() + 1, step)?;
+        let params: Vec<Tensor> = self
+            .swing()
+            .parameters()
+            .into_iter()
+            .map(|(_, t)| t.shallow_clone())
+            .collect();
+        let grads = Tensor::run_backward(&[&(total / unroll as f64)], &params, false, false);
+        let rates = vec![lr; params.len()];
+        self.adam.update_with(&params, &grads, &rates);
+        // The model's own output becomes the state later sequences start from.
+        tch::no_grad(|| {
+            for (idx, y) in outputs {
+                let _ = self.states.index_copy_(0, &idx, &y);
+            }
+        });
+        Ok(values)
+    }
+
+    /// RMS of the swing's rest-space displacement over the training frames (mm).
+    fn swing_rms_mm(&self) -> f64 {
+        tch::no_grad(|| {
+            let frames = self.states.size()[0] as usize;
+            let mut sum = 0.0;
+            for s in (0..frames).step_by(PREDICT_CHUNK) {
+                let n = PREDICT_CHUNK.min(frames - s);
+                let d = self
+                    .swing()
+                    .displacement(&self.states.narrow(0, s as i64, n as i64));
+                sum += d.square().sum(Kind::Double).double_value(&[]);
+            }
+            let count = (frames * self.network().shape.vertices).max(1) as f64;
+            1000.0 * (sum / count).sqrt()
+        })
+    }
+
+    pub fn epoch(&self) -> usize {
+        self.info().history.len()
+    }
+
+    fn learning_rate(&self) -> f64 {
+        super::cosine_rate(
+            self.settings.learning_rate,
+            self.epoch(),
+            self.settings.epochs,
+        )
+    }
+
+    pub fn model_file(&self) -> &ModelFile {
+        &self.file
+    }
+}
+
+/// The swing's first blend shapes: the principal modes of the PBNS's own deformation over the
+/// training frames, each scaled to its spread. A random basis stretches the cloth in every
+/// direction, so inertia (tiny beside stretching) could never move it; these modes are the ways the
+/// pose already moves the garment (the hem pushed by a thigh), soft enough to swing.
+fn pose_modes(rest: &Tensor, template: &Tensor, shapes: usize) -> Tensor {
+    tch::no_grad(|| {
+        let frames = rest.size()[0];
+        // At most ~1,000 frames spread over the clips: the modes, not every frame, are needed.
+        let stride = (frames / 1000).max(1);
+        let idx = Tensor::arange_start_step(0, frames, stride, (Kind::Int64, rest.device()));
+        let d = (rest.index_select(0, &idx) - template.unsqueeze(0)).view([idx.size()[0], -1]);
+        let d = &d - d.mean_dim(0, true, Kind::Float);
+        let (_, sv, v) = d.svd(true, true);
+        let vt = v.transpose(0, 1);
+        let k = (shapes as i64).min(vt.size()[0]);
+        let spread = sv.narrow(0, 0, k) / (idx.size()[0] as f64).sqrt();
+        let modes = vt.narrow(0, 0, k) * spread.unsqueeze(1);
+        if k == shapes as i64 {
+            return modes;
+        }
+        // Fewer frames than shapes: the rest start at zero.
+        let pad = Tensor::zeros(
+            [shapes as i64 - k, vt.size()[1]],
+            (Kind::Float, rest.device()),
+        );
+        Tensor::cat(&[modes, pad], 0)
+    })
+}
+
+impl Training for Trainer {
+    type Record = EpochLine;
+
+    fn epochs_done(&self) -> usize {
+        self.epoch()
+    }
+
+    fn run_epoch(&mut self) -> Result<EpochLine, Blowup> {
+        let start = Instant::now();
+        let epoch = self.epoch();
+        if epoch > 0 && epoch % self.settings.refresh_every.max(1) == 0 {
+            self.refresh();
+        }
+        self.replay();
+        let lr = self.learning_rate();
+        let mut order = self.starts.clone();
+        shuffle(&mut order, self.rng.next_u64());
+        let steps = self.steps_per_epoch();
+        let mut sums = [0.0f64; 7];
+        for k in 0..steps {
+            let batch: Vec<usize> = (0..self.settings.batch)
+                .map(|i| order[(k * self.settings.batch + i) % order.len()])
+                .collect();
+            let v = self.step(&batch, lr)?;
+            for (a, b) in sums.iter_mut().zip(v) {
+                *a += b / steps as f64;
+            }
+        }
+        self.replay();
+        let terms = LossTerms {
+            edge: sums[0],
+            bend: sums[1],
+            collision: sums[2],
+            gravity: sums[3],
+            pin: sums[4],
+        };
+        let record = SwingEpoch {
+            epoch: epoch + 1,
+            loss: terms.total() + sums[5],
+            terms,
+            inertia: sums[5],
+            collided: sums[6],
+            swing_rms_mm: self.swing_rms_mm(),
+            seconds: start.elapsed().as_secs_f64(),
+        };
+        let info = self.info_mut();
+        info.history.push(record.clone());
+        info.training.epochs = info.history.len();
+        Ok(EpochLine {
+            record,
+            learning_rate: lr,
+        })
+    }
+
+    fn save(&mut self, path: &Path, checkpoint: bool) -> Result<()> {
+        self.file.extra = if checkpoint {
+            self.adam.state(&self.swing().parameters())
+        } else {
+            Vec::new()
+        };
+        let r = crate::models::file::save(path, &self.file);
+        self.file.extra.clear();
+        r
+    }
+
+    /// Continues from the checkpoint's network, optimiser state and history (the candidate
+    /// lists and states are rebuilt from that network, so the run differs slightly from one
+    /// that never stopped).
+    fn resume(&mut self, checkpoint: &Path) -> Result<()> {
+        let ckpt = crate::models::file::load(checkpoint, self.settings.device)
+            .with_context(|| "--resume needs the checkpoint of an earlier run")?;
+        let theirs = ckpt.info.pbns()?.swing.clone();
+        let same = theirs.as_ref().is_some_and(|t| {
+            t.shape == self.info().shape
+                && t.training.seed == self.settings.seed
+                && t.training.frames == self.info().training.frames
+        });
+        if !same || ckpt.info.garment != self.file.info.garment {
+            bail!(
+                "{}: checkpoint was made with other inputs or settings; start without --resume",
+                checkpoint.display()
+            );
+        }
+        let Model::Pbns(mut network) = ckpt.model else {
+            bail!("{}: not a PBNS checkpoint", checkpoint.display());
+        };
+        let mut swing = network.swing.take().expect("checked above");
+        swing.set_trainable();
+        self.adam.restore(&swing.parameters(), &ckpt.extra)?;
+        if let Model::Pbns(p) = &mut self.file.model {
+            p.swing = Some(swing);
+        }
+        *self.info_mut() = theirs.expect("checked above");
+        self.refresh();
+        Ok(())
+    }
+
+    fn describe(line: &EpochLine) -> String {
+        let r = &line.record;
+        format!(
+            "loss {:.4}  inertia {:.4}  collided {:.2} %  swing {:.1} mm",
+            r.loss,
+            r.inertia,
+            100.0 * r.collided,
+            r.swing_rms_mm
+        )
+    }
+}
