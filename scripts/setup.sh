@@ -54,9 +54,10 @@ if [ ! -x .venv/bin/ray ]; then
   .venv/bin/pip install -q --disable-pip-version-check ray==2.60.0
 fi
 
-# 3. npm tools used by tests: Khronos glTF validator, three.js (GLTFLoader in Node), gltfpack.
+# 3. npm tools used by tests: Khronos glTF validator, three.js (GLTFLoader in Node), gltfpack,
+#    pngjs (16-bit PNG of vertex animation textures).
 if [ ! -d tools/node/node_modules/gltf-validator ] || [ ! -d tools/node/node_modules/three ] \
-  || [ ! -d tools/node/node_modules/gltfpack ]; then
+  || [ ! -d tools/node/node_modules/gltfpack ] || [ ! -d tools/node/node_modules/pngjs ]; then
   log "npm install (tools/node)"
   (cd tools/node && npm install --silent --no-audit --no-fund >/dev/null)
 fi

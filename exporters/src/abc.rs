@@ -8,7 +8,7 @@
 //! the embedded Python (`python_bridge/src/abc_writer.py`) maps plain buffers onto schemas.
 //! Units metres, Y-up (Alembic's convention), said in the Xform's user properties.
 
-use crate::asset::{extent, PointCache};
+use crate::asset::{extent, CacheSpace, PointCache};
 use crate::atomic::replace_via;
 use python_bridge::{BridgeError, Value};
 use std::borrow::Cow;
@@ -27,6 +27,16 @@ pub enum AbcError {
 
 /// Writes `caches` (one shot: the same rate and frame count) to one archive, a mesh each.
 pub fn write_point_caches(caches: &[PointCache], path: &Path) -> Result<(), AbcError> {
+    write_point_caches_in(caches, path, CacheSpace::NATIVE)
+}
+
+/// [`write_point_caches`] of points in `space`: Alembic has no field for units or up axis, so
+/// the Xforms' user properties say them (`units`, `upAxis`).
+pub fn write_point_caches_in(
+    caches: &[PointCache],
+    path: &Path,
+    space: CacheSpace,
+) -> Result<(), AbcError> {
     let invalid = |reason: String| AbcError::Invalid {
         path: path.display().to_string(),
         reason,
@@ -47,7 +57,7 @@ pub fn write_point_caches(caches: &[PointCache], path: &Path) -> Result<(), AbcE
             first.name, c.name
         )));
     }
-    let spec = spec(caches);
+    let spec = spec(caches, space);
     // Into a temporary sibling, renamed at the end: a failed export never leaves a half file.
     replace_via(path, |tmp| {
         python_bridge::write_alembic(&spec, tmp).map_err(|source| AbcError::Bridge {
@@ -57,7 +67,7 @@ pub fn write_point_caches(caches: &[PointCache], path: &Path) -> Result<(), AbcE
     })
 }
 
-fn spec(caches: &[PointCache]) -> Value<'_> {
+fn spec(caches: &[PointCache], space: CacheSpace) -> Value<'_> {
     let mut taken = HashSet::new();
     let meshes = caches
         .iter()
@@ -93,7 +103,7 @@ fn spec(caches: &[PointCache]) -> Value<'_> {
         (
             "user_properties",
             Value::List(
-                [("units", "m"), ("upAxis", "Y")]
+                [("units", space.units()), ("upAxis", space.up_axis())]
                     .iter()
                     .map(|(k, v)| Value::List(vec![(*k).into(), (*v).into()]))
                     .collect(),

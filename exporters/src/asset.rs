@@ -49,6 +49,8 @@ pub struct Mesh {
     pub points: Vec<[f32; 3]>,
     pub normals: Option<Vec<[f32; 3]>>,
     pub uvs: Option<Vec<[f32; 2]>>,
+    /// A second UV set (glTF `TEXCOORD_1`; needs `uvs`): a VAT's texel column per vertex.
+    pub uvs2: Option<Vec<[f32; 2]>>,
     pub triangles: Vec<[u32; 3]>,
     pub skin: Option<SkinBinding>,
     pub blend_shapes: Vec<BlendShape>,
@@ -152,6 +154,8 @@ impl BakedAsset {
             let per_vertex = |len: Option<usize>| len.is_none_or(|l| l == n);
             if !per_vertex(mesh.normals.as_ref().map(Vec::len))
                 || !per_vertex(mesh.uvs.as_ref().map(Vec::len))
+                || !per_vertex(mesh.uvs2.as_ref().map(Vec::len))
+                || (mesh.uvs2.is_some() && mesh.uvs.is_none())
             {
                 return Err(format!(
                     "mesh '{}': normals or UVs do not match {n} vertices",
@@ -272,6 +276,75 @@ impl PointCache {
             ));
         }
         Ok(())
+    }
+}
+
+/// The units and up axis a point cache is written in (`--out-units cm|m`, `--out-up y|z`):
+/// garmentbake works in metres, Y-up, right-handed; Unreal wants centimetres, Z-up, Maya
+/// centimetres, Y-up.
+/// [`CacheSpace::point`] turns our points into it (the caller does, before writing); writers
+/// record it where the format has a place (USD `metersPerUnit` / `upAxis`, Alembic's user
+/// properties, a VAT's sidecar); PC2 and MDD have none.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct CacheSpace {
+    pub centimetres: bool,
+    pub z_up: bool,
+}
+
+impl CacheSpace {
+    /// Metres, Y-up: the points as garmentbake has them.
+    pub const NATIVE: CacheSpace = CacheSpace {
+        centimetres: false,
+        z_up: false,
+    };
+
+    /// Our Y-up point turned Z-up by a right-handed quarter turn about +X, `(x, y, z) → (x, −z,
+    /// y)` (Blender's glTF and USD importers turn Y-up files the same way: the garment's front,
+    /// +Z, faces −Y), then scaled to the units.
+    pub fn point(self, p: [f32; 3]) -> [f32; 3] {
+        let s = self.scale();
+        self.direction(p).map(|c| c * s)
+    }
+
+    /// A direction (a normal): turned, not scaled.
+    pub fn direction(self, d: [f32; 3]) -> [f32; 3] {
+        if self.z_up {
+            [d[0], -d[2], d[1]]
+        } else {
+            d
+        }
+    }
+
+    /// Units per metre: 100 for centimetres.
+    pub fn scale(self) -> f32 {
+        if self.centimetres {
+            100.0
+        } else {
+            1.0
+        }
+    }
+
+    /// USD `metersPerUnit`.
+    pub fn meters_per_unit(self) -> f64 {
+        1.0 / self.scale() as f64
+    }
+
+    /// `m` or `cm`.
+    pub fn units(self) -> &'static str {
+        if self.centimetres {
+            "cm"
+        } else {
+            "m"
+        }
+    }
+
+    /// `Y` or `Z` (USD's `upAxis` tokens).
+    pub fn up_axis(self) -> &'static str {
+        if self.z_up {
+            "Z"
+        } else {
+            "Y"
+        }
     }
 }
 

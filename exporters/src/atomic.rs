@@ -139,11 +139,16 @@ impl OutputSet {
         };
         for o in outputs {
             let shown = o.path.display();
-            let ext = o
+            // An extension may have two parts (`vat.exr`): the name's end must be one of them.
+            let name = o
                 .path
-                .extension()
-                .map(|e| e.to_string_lossy().to_ascii_lowercase());
-            let known = ext.is_some_and(|e| o.extensions.contains(&e.as_str()));
+                .file_name()
+                .map(|n| n.to_string_lossy().to_ascii_lowercase())
+                .unwrap_or_default();
+            let known = o
+                .extensions
+                .iter()
+                .any(|e| name.len() > e.len() + 1 && name.ends_with(&format!(".{e}")));
             if !known && !o.extensions.is_empty() {
                 let list: Vec<String> = o.extensions.iter().map(|e| format!(".{e}")).collect();
                 let list = match list.split_last() {

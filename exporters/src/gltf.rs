@@ -341,11 +341,13 @@ fn add_mesh(b: &mut Builder, mesh: &Mesh) -> json::Index<json::Mesh> {
             b.floats(&flat(normals), 3, Target::Vertex, false),
         );
     }
-    if let Some(uvs) = &mesh.uvs {
-        attributes.insert(
-            Valid(Semantic::TexCoords(0)),
-            b.floats(&flat(uvs), 2, Target::Vertex, false),
-        );
+    for (set, uvs) in [&mesh.uvs, &mesh.uvs2].into_iter().enumerate() {
+        if let Some(uvs) = uvs {
+            attributes.insert(
+                Valid(Semantic::TexCoords(set as u32)),
+                b.floats(&flat(uvs), 2, Target::Vertex, false),
+            );
+        }
     }
     if let Some(skin) = &mesh.skin {
         for (set, (joints, weights)) in skin_sets(skin).into_iter().enumerate() {

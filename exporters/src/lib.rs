@@ -13,9 +13,10 @@ pub mod mdd;
 pub mod pc2;
 #[cfg(feature = "usd")]
 pub mod usd;
+pub mod vat;
 pub mod viewer;
 
-pub use asset::{BakedAsset, PointCache};
+pub use asset::{BakedAsset, CacheSpace, PointCache};
 use std::path::Path;
 
 #[derive(Debug, thiserror::Error)]
@@ -32,6 +33,8 @@ pub enum ExportError {
     #[cfg(feature = "usd")]
     #[error(transparent)]
     Abc(#[from] abc::AbcError),
+    #[error(transparent)]
+    Vat(#[from] vat::VatError),
     #[error("cannot write {path}: {what}")]
     Unsupported { path: String, what: String },
 }
@@ -45,6 +48,8 @@ pub enum FileKind {
     Mdd,
     /// Alembic (`.abc`): point caches, written through the Python bridge like USD.
     Alembic,
+    /// Vertex animation textures (`.vat.exr`, 16-bit `.vat.png`): a point cache as textures.
+    Vat,
     Bvh,
     Obj,
     /// A garmentbake model (`.safetensors`).
@@ -52,8 +57,9 @@ pub enum FileKind {
 }
 
 /// The one extension table: every extension, its kind, and whether garmentbake writes it
-/// (usd-core reads plain `.usd`, we write the explicit `.usda`/`.usdc`/`.usdz`).
-pub const EXTENSIONS: [(&str, FileKind, bool); 12] = [
+/// (usd-core reads plain `.usd`, we write the explicit `.usda`/`.usdc`/`.usdz`). An extension
+/// may have two parts (`vat.exr`): a name matches the row its end names.
+pub const EXTENSIONS: [(&str, FileKind, bool); 14] = [
     ("glb", FileKind::Gltf, true),
     ("gltf", FileKind::Gltf, true),
     ("usd", FileKind::Usd, false),
@@ -63,6 +69,8 @@ pub const EXTENSIONS: [(&str, FileKind, bool); 12] = [
     ("pc2", FileKind::Pc2, true),
     ("mdd", FileKind::Mdd, true),
     ("abc", FileKind::Alembic, true),
+    ("vat.exr", FileKind::Vat, true),
+    ("vat.png", FileKind::Vat, true),
     ("bvh", FileKind::Bvh, false),
     ("obj", FileKind::Obj, true),
     ("safetensors", FileKind::Model, true),
@@ -80,8 +88,11 @@ impl FileKind {
     }
 
     fn row(path: &Path) -> Option<(&'static str, FileKind, bool)> {
-        let ext = path.extension()?.to_string_lossy().to_ascii_lowercase();
-        EXTENSIONS.iter().copied().find(|(e, _, _)| *e == ext)
+        let name = path.file_name()?.to_string_lossy().to_ascii_lowercase();
+        EXTENSIONS
+            .iter()
+            .copied()
+            .find(|(e, _, _)| name.len() > e.len() + 1 && name.ends_with(&format!(".{e}")))
     }
 
     /// The extensions garmentbake writes for `kinds` (lower case, no dot), e.g. for the checks
@@ -118,22 +129,38 @@ pub fn write(asset: &BakedAsset, path: &Path) -> Result<(), ExportError> {
     }
 }
 
-/// The kinds a point cache can be written as.
-pub const POINT_CACHE_KINDS: [FileKind; 4] = [
+/// The kinds a point cache can be written as (a VAT through [`vat::write`], which needs the
+/// rest mesh and normals beside the frames).
+pub const POINT_CACHE_KINDS: [FileKind; 5] = [
     FileKind::Pc2,
     FileKind::Mdd,
     FileKind::Usd,
     FileKind::Alembic,
+    FileKind::Vat,
 ];
 
 /// Writes a per-frame point cache in the format its extension names: PC2, MDD, USD (a Mesh
 /// with time-sampled points) or Alembic (a PolyMesh with time-sampled positions).
 pub fn write_point_cache(cache: &PointCache, path: &Path) -> Result<(), ExportError> {
+    write_point_cache_in(cache, path, CacheSpace::NATIVE)
+}
+
+/// [`write_point_cache`] of points already turned into `space` (see [`CacheSpace::point`]),
+/// recorded where the format has a place (USD, Alembic).
+pub fn write_point_cache_in(
+    cache: &PointCache,
+    path: &Path,
+    space: CacheSpace,
+) -> Result<(), ExportError> {
     match FileKind::written(path) {
         Some(FileKind::Pc2) => Ok(pc2::write(path, cache)?),
         Some(FileKind::Mdd) => Ok(mdd::write(path, cache)?),
-        Some(FileKind::Usd) => write_usd_cache(cache, path),
-        Some(FileKind::Alembic) => write_abc_caches(std::slice::from_ref(cache), path),
+        Some(FileKind::Usd) => write_usd_caches(std::slice::from_ref(cache), path, space),
+        Some(FileKind::Alembic) => write_abc_caches(std::slice::from_ref(cache), path, space),
+        Some(FileKind::Vat) => Err(unsupported(
+            path,
+            "a VAT needs the rest mesh and normals beside the frames: write it with exporters::vat::write",
+        )),
         _ => Err(wrong_extension(path, "point-cache ", &POINT_CACHE_KINDS)),
     }
 }
@@ -142,9 +169,18 @@ pub fn write_point_cache(cache: &PointCache, path: &Path) -> Result<(), ExportEr
 /// one USD stage or Alembic archive, one mesh each; PC2 and MDD hold a single mesh, so other
 /// extensions are refused.
 pub fn write_point_caches(caches: &[PointCache], path: &Path) -> Result<(), ExportError> {
+    write_point_caches_in(caches, path, CacheSpace::NATIVE)
+}
+
+/// [`write_point_caches`] of points already turned into `space`, recorded in the file.
+pub fn write_point_caches_in(
+    caches: &[PointCache],
+    path: &Path,
+    space: CacheSpace,
+) -> Result<(), ExportError> {
     match FileKind::written(path) {
-        Some(FileKind::Usd) => write_usd_caches(caches, path),
-        Some(FileKind::Alembic) => write_abc_caches(caches, path),
+        Some(FileKind::Usd) => write_usd_caches(caches, path, space),
+        Some(FileKind::Alembic) => write_abc_caches(caches, path, space),
         _ => Err(wrong_extension(
             path,
             "several-mesh point-cache ",
@@ -172,22 +208,25 @@ fn write_usd(asset: &BakedAsset, path: &Path) -> Result<(), ExportError> {
 }
 
 #[cfg(feature = "usd")]
-fn write_usd_cache(cache: &PointCache, path: &Path) -> Result<(), ExportError> {
-    write_usd_caches(std::slice::from_ref(cache), path)
+fn write_usd_caches(
+    caches: &[PointCache],
+    path: &Path,
+    space: CacheSpace,
+) -> Result<(), ExportError> {
+    Ok(usd::write_point_caches_in(caches, path, space)?)
 }
 
 #[cfg(feature = "usd")]
-fn write_usd_caches(caches: &[PointCache], path: &Path) -> Result<(), ExportError> {
-    Ok(usd::write_point_caches(caches, path)?)
-}
-
-#[cfg(feature = "usd")]
-fn write_abc_caches(caches: &[PointCache], path: &Path) -> Result<(), ExportError> {
-    Ok(abc::write_point_caches(caches, path)?)
+fn write_abc_caches(
+    caches: &[PointCache],
+    path: &Path,
+    space: CacheSpace,
+) -> Result<(), ExportError> {
+    Ok(abc::write_point_caches_in(caches, path, space)?)
 }
 
 #[cfg(not(feature = "usd"))]
-fn write_abc_caches(_: &[PointCache], path: &Path) -> Result<(), ExportError> {
+fn write_abc_caches(_: &[PointCache], path: &Path, _: CacheSpace) -> Result<(), ExportError> {
     Err(unsupported(
         path,
         "this garmentbake was built without the Python bridge that writes Alembic (cargo feature `usd`); rebuild with default features",
@@ -203,11 +242,6 @@ fn write_usd(_: &BakedAsset, path: &Path) -> Result<(), ExportError> {
 }
 
 #[cfg(not(feature = "usd"))]
-fn write_usd_cache(_: &PointCache, path: &Path) -> Result<(), ExportError> {
-    Err(unsupported(path, NO_USD))
-}
-
-#[cfg(not(feature = "usd"))]
-fn write_usd_caches(_: &[PointCache], path: &Path) -> Result<(), ExportError> {
+fn write_usd_caches(_: &[PointCache], path: &Path, _: CacheSpace) -> Result<(), ExportError> {
     Err(unsupported(path, NO_USD))
 }

@@ -11,7 +11,7 @@
 //! embedded Python (`python_bridge/src/usd_writer.py`) only maps plain buffers onto schemas.
 //! `.usda` is text, `.usdc` binary (crate), `.usdz` a zip around a `.usdc`.
 
-use crate::asset::{extent, unit_quat, BakedAsset, Mesh, PointCache, SkelAnimation};
+use crate::asset::{extent, unit_quat, BakedAsset, CacheSpace, Mesh, PointCache, SkelAnimation};
 use crate::atomic::replace_via;
 use nalgebra::{Matrix4, Quaternion, Translation3, UnitQuaternion};
 use python_bridge::{BridgeError, Value};
@@ -45,13 +45,22 @@ pub fn write(asset: &BakedAsset, path: &Path) -> Result<(), UsdError> {
 /// is the stage's root `Mesh` (named after the file); several (a garment and the posed body) are
 /// `Mesh` prims named after their caches under a root `Xform`, on one timeline.
 pub fn write_point_caches(caches: &[PointCache], path: &Path) -> Result<(), UsdError> {
+    write_point_caches_in(caches, path, CacheSpace::NATIVE)
+}
+
+/// [`write_point_caches`] of points in `space`: the stage's `metersPerUnit` and `upAxis` say it.
+pub fn write_point_caches_in(
+    caches: &[PointCache],
+    path: &Path,
+    space: CacheSpace,
+) -> Result<(), UsdError> {
     check_extension(path)
         .and_then(|()| same_timeline(caches))
         .and_then(|()| caches.iter().try_for_each(PointCache::check))
         .map_err(invalid(path))?;
     author(
         "write_point_cache",
-        &point_caches_spec(caches, &root_name(path)),
+        &point_caches_spec(caches, &root_name(path), space),
         path,
     )
 }
@@ -391,7 +400,7 @@ fn animation_spec<'a>(
     ])
 }
 
-fn point_caches_spec<'a>(caches: &'a [PointCache], root: &str) -> Value<'a> {
+fn point_caches_spec<'a>(caches: &'a [PointCache], root: &str, space: CacheSpace) -> Value<'a> {
     let frames = caches[0].frame_count();
     let mut taken = HashSet::from([root.to_string()]);
     let meshes = caches
@@ -410,6 +419,8 @@ fn point_caches_spec<'a>(caches: &'a [PointCache], root: &str) -> Value<'a> {
         ("fps", Value::Float(caches[0].fps as f64)),
         ("start", Value::Float(0.0)),
         ("end", Value::Float(frames.saturating_sub(1) as f64)),
+        ("meters_per_unit", Value::Float(space.meters_per_unit())),
+        ("up_axis", space.up_axis().to_string().into()),
         ("provenance", Value::List(Vec::new())),
         (
             "times",

@@ -23,8 +23,10 @@ def _chunk(mv, i, n):
 def _stage(spec):
     """In-memory stage with the metadata every output carries."""
     stage = Usd.Stage.CreateInMemory()
-    stage.SetMetadata("upAxis", UsdGeom.Tokens.y)
-    stage.SetMetadata("metersPerUnit", 1.0)
+    # Metres, Y-up unless a point cache was written in another space (--units, --up).
+    up = UsdGeom.Tokens.z if spec.get("up_axis") == "Z" else UsdGeom.Tokens.y
+    stage.SetMetadata("upAxis", up)
+    stage.SetMetadata("metersPerUnit", spec.get("meters_per_unit", 1.0))
     stage.SetTimeCodesPerSecond(spec["fps"])
     stage.SetFramesPerSecond(spec["fps"])
     stage.SetStartTimeCode(spec["start"])

@@ -88,6 +88,7 @@ pub fn skinned_mesh_asset(
         points: pick(&mesh.positions),
         normals: Some(pick(&normals)),
         uvs,
+        uvs2: None,
         triangles,
         skin: Some(asset::SkinBinding {
             influences: skin.influences,

@@ -448,3 +448,39 @@ pub fn output_set(
         .collect();
     Ok(exporters::atomic::OutputSet::check(&planned)?)
 }
+
+/// `--out-units` / `--out-up`: the units and up axis the point caches are written in (garmentbake
+/// works in metres, Y-up; Unreal wants `--out-units cm --out-up z`, Maya `--out-units cm`).
+/// Recorded where the format has a place: USD `metersPerUnit` / `upAxis`, Alembic's user
+/// properties, a VAT's sidecar; PC2 and MDD have none. (`--units` / `--up` name a clip's own.)
+#[derive(clap::Args)]
+#[command(next_help_heading = "Outputs")]
+pub struct CacheSpaceArgs {
+    /// Units of the written caches: m (metres) or cm (x100).
+    #[arg(long, value_enum, default_value = "m")]
+    pub out_units: UnitsArg,
+    /// Up axis of the written caches: y, or z (x, y, z) -> (x, -z, y), a right-handed turn.
+    #[arg(long, value_enum, default_value = "y")]
+    pub out_up: UpArg,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub enum UnitsArg {
+    M,
+    Cm,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub enum UpArg {
+    Y,
+    Z,
+}
+
+impl CacheSpaceArgs {
+    pub fn space(&self) -> exporters::CacheSpace {
+        exporters::CacheSpace {
+            centimetres: matches!(self.out_units, UnitsArg::Cm),
+            z_up: matches!(self.out_up, UpArg::Z),
+        }
+    }
+}

@@ -4,7 +4,7 @@ use super::args::{ClipArgs, ComputeArgs, OutputArgs};
 use super::Execute;
 use crate::eval::{compare_frames, lbs_frames, model_frames, ClipCoverage, Comparison};
 use crate::io::gltf_body::read_body;
-use crate::io::point_cache::write_cache;
+use crate::io::point_cache::write_cache_in;
 use crate::metrics::{body_edges_under, ClothGeometry, Inside, Metrics};
 use crate::models::coverage::{Coverage, OutsideWeights};
 use crate::models::file::check_skeleton;
@@ -42,7 +42,8 @@ pub struct Args {
     pub body: Option<PathBuf>,
     /// Output point cache of the garment, one sample per frame: .pc2 (start frame 0), .mdd
     /// (Lightwave's, frame times f / fps), .usda/.usdc/.usdz (a Mesh with time-sampled points
-    /// and extent) or .abc (Alembic PolyMesh, through the Python bridge).
+    /// and extent), .abc (Alembic PolyMesh, through the Python bridge) or .vat.exr / .vat.png
+    /// (vertex animation textures, with their normals, JSON and glb beside).
     #[arg(long, help_heading = "Outputs")]
     pub out: PathBuf,
     /// Also write the posed body as a point cache (same formats).
@@ -54,6 +55,8 @@ pub struct Args {
     /// Keep each blend-shape weight within the range it took over the training poses.
     #[arg(long, help_heading = "Advanced")]
     pub clamp_weights: bool,
+    #[command(flatten)]
+    pub space: super::args::CacheSpaceArgs,
     #[command(flatten)]
     pub compute: ComputeArgs,
     #[command(flatten)]
@@ -198,12 +201,15 @@ impl Execute for Args {
         // Per frame once: the coverage split below means subsets of the same figures.
         let per_frame = compare_frames(&geometry, &[&garment, &lbs], &body, &under, &poses);
         let comparison = Comparison::of(&per_frame.iter().collect::<Vec<_>>(), 2);
+        let space = self.space.space();
         outputs.write(&self.out, |p| {
-            write_cache(p, &model.garment, &garment, anim.fps)
+            write_cache_in(p, &model.garment, &garment, anim.fps, space)
         })?;
         if let Some(path) = &self.body_out {
             let frames = lbs_frames(&body.skin, &body.mesh.positions, &body.skeleton, &poses);
-            outputs.write(path, |p| write_cache(p, &body.mesh, &frames, anim.fps))?;
+            outputs.write(path, |p| {
+                write_cache_in(p, &body.mesh, &frames, anim.fps, space)
+            })?;
         }
         let view = match &self.view {
             Some(page) => {

@@ -4,7 +4,7 @@ use super::args::{output_set, ComputeArgs, OutputArgs, POINT_CACHE};
 use super::Execute;
 use crate::interpolate::between;
 use crate::io::point_cache::read_pc2;
-use crate::io::point_cache::write_cache;
+use crate::io::point_cache::write_cache_in;
 use crate::metrics::vertex_distances_mm;
 use crate::motion::{load_clip, read_maps};
 use crate::simulate::stats::{self, FrameStats, Series};
@@ -39,9 +39,12 @@ pub struct Args {
     /// The two clip frames, A,B (A < B), e.g. 40,70.
     #[arg(long, value_delimiter = ',', required = true)]
     pub between: Vec<usize>,
-    /// Output point cache (.pc2, .mdd, .usda/.usdc/.usd, .abc), samples for frames A..=B.
+    /// Output point cache (.pc2, .mdd, .usda/.usdc/.usd, .abc, .vat.exr/.vat.png), samples for
+    /// frames A..=B.
     #[arg(long)]
     pub out: PathBuf,
+    #[command(flatten)]
+    pub space: super::args::CacheSpaceArgs,
     #[command(flatten)]
     pub compute: ComputeArgs,
     #[command(flatten)]
@@ -103,7 +106,7 @@ impl Execute for Args {
         let path =
             between(&file, &poses, &sim, (a, b)).with_context(|| format!("--between {a},{b}"))?;
         outputs.write(&self.out, |p| {
-            write_cache(p, &file.garment, &path.frames, fps)
+            write_cache_in(p, &file.garment, &path.frames, fps, self.space.space())
         })?;
         outputs.commit()?;
         let (per_frame, summary) = stats::of(

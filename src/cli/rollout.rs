@@ -52,7 +52,8 @@ pub struct Args {
     /// Frames over which a later clip blends in from the previous clip's last pose.
     #[arg(long, default_value_t = 15)]
     pub fade: usize,
-    /// Output: a point cache (.pc2, .mdd, .usda/.usdc, .abc: time-sampled points), or a compressed
+    /// Output: a point cache (.pc2, .mdd, .usda/.usdc, .abc: time-sampled points; .vat.exr /
+    /// .vat.png: vertex animation textures with their normals, JSON and glb), or a compressed
     /// glTF (.glb/.gltf: the garment skinned to the body's skeleton plus blend shapes from the
     /// singular directions of its un-skinned residual over the roll-out, their weights animated;
     /// plays in any glTF viewer).
@@ -111,6 +112,8 @@ pub struct Args {
     #[command(flatten)]
     pub collision: CollisionFixArgs,
     #[command(flatten)]
+    pub space: super::args::CacheSpaceArgs,
+    #[command(flatten)]
     pub compute: ComputeArgs,
     #[command(flatten)]
     pub output: OutputArgs,
@@ -125,6 +128,7 @@ impl Execute for Args {
             FileKind::Mdd,
             FileKind::Usd,
             FileKind::Alembic,
+            FileKind::Vat,
             FileKind::Gltf,
         ];
         let outputs = output_set(&[
@@ -152,6 +156,7 @@ impl Execute for Args {
             lbs_out: self.lbs_out.clone(),
             view: self.view.clone(),
             validate: self.validate,
+            space: self.space.space(),
         };
         let feedback = Feedback {
             say,

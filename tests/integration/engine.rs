@@ -366,3 +366,233 @@ fn alembic_without_its_module_and_an_unknown_extension_are_one_error_line() {
         "nothing written"
     );
 }
+
+/// `eval` of the test model on 131_02 in metres, Y-up, as a PC2: run once for the tests below.
+fn native_pc2() -> &'static std::path::PathBuf {
+    static PC2: std::sync::OnceLock<std::path::PathBuf> = std::sync::OnceLock::new();
+    PC2.get_or_init(|| {
+        let pc2 = out_dir("engine_native").join("walk.pc2");
+        crate::bake::eval_131_02(&pc2);
+        pc2
+    })
+}
+
+/// tools/node/vat_read.mjs: the VAT of `sidecar` rebuilt by three.js (GLTFLoader, EXRLoader) and
+/// pngjs from the published layout alone, against `pc2`.
+fn vat_read(sidecar: &Path, pc2: &Path) -> serde_json::Value {
+    let out = run_ok(
+        Command::new("node")
+            .arg(root().join("tools/node/vat_read.mjs"))
+            .arg(sidecar)
+            .arg(pc2),
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// `eval --out walk.vat.exr` / `walk.vat.png` (the same `io::point_cache` writer serves rollout,
+/// interpolate and batch): four files each (positions, normals, JSON, glb), the glb
+/// Khronos-clean; rebuilt by readers we did not write (three.js' GLTFLoader for the rest
+/// positions and TEXCOORD_1, its EXRLoader, pngjs for 16-bit PNG) every frame of every vertex
+/// lies within the encoding's bound of the same command's PC2: float32 EXR measured 0.0003 mm,
+/// 16-bit PNG 0.0195 mm against its half-step bound of 0.0194 mm (+ f32 rounding) over the
+/// walk's 2.4 m bounds. The normals texture, read by the `image` crate, holds each frame's
+/// normals of the PC2's positions. Checked to fail with TEXCOORD_1 one column off and with the
+/// rows written bottom-up (docs/caches.md says how it failed).
+#[test]
+fn eval_writes_vertex_animation_textures_threejs_and_pngjs_rebuild_as_the_pc2() {
+    let pc2 = native_pc2();
+    let (_, frames) = exporters::pc2::read(&std::fs::read(pc2).unwrap()).unwrap();
+    let model = garmentbake::models::file::load(crate::bake::model(), tch::Device::Cpu).unwrap();
+    let triangles = &model.garment.triangles;
+    for ext in ["exr", "png"] {
+        let dir = out_dir(&format!("engine_vat_{ext}"));
+        let out = dir.join(format!("walk.vat.{ext}"));
+        crate::bake::eval_131_02(&out);
+        let names = ["walk.vat.json", "walk.vat.glb"];
+        let normals_file = dir.join(format!("walk.vat.normals.{ext}"));
+        assert!(normals_file.exists() && names.iter().all(|n| dir.join(n).exists()));
+        let (ok, text) = khronos_validate(&dir.join("walk.vat.glb"));
+        assert!(ok, "{text}");
+        let sidecar = dir.join("walk.vat.json");
+        let side: exporters::vat::Sidecar =
+            serde_json::from_str(&std::fs::read_to_string(&sidecar).unwrap()).unwrap();
+        assert_eq!(
+            (side.width, side.height, side.frame_count),
+            (2808, 312, 312)
+        );
+        assert_eq!(side.fps, 30.0);
+        let r = vat_read(&sidecar, pc2);
+        let max = r["max_error"].as_f64().unwrap();
+        eprintln!(
+            ".vat.{ext}: {} frames x {} glb vertices, max {:.5} mm, mean {:.5} mm from the PC2 (sizes: positions {} bytes, PC2 {} bytes)",
+            r["frames"],
+            r["vertices"],
+            max * 1e3,
+            r["mean_error"].as_f64().unwrap() * 1e3,
+            std::fs::metadata(&out).unwrap().len(),
+            std::fs::metadata(pc2).unwrap().len()
+        );
+        assert_eq!(r["frames"], 312, "{r}");
+        let bound = match ext {
+            // float32 of offsets normalised to [0, 1]: measured 0.0003 mm.
+            "exr" => 3e-6,
+            // Half a 16-bit step per axis (0.0194 mm here), and f32 rounding of the metres.
+            _ => {
+                let half: f64 = (0..3)
+                    .map(|a| {
+                        (0.5 * (side.bounds_max[a] - side.bounds_min[a]) as f64 / 65535.0).powi(2)
+                    })
+                    .sum::<f64>()
+                    .sqrt();
+                half + 1e-6
+            }
+        };
+        assert!(
+            max <= bound,
+            "{:.5} mm > {:.5} mm: {r}",
+            max * 1e3,
+            bound * 1e3
+        );
+        // Normals: the texture's (image crate's decoder) against the PC2 frames' own normals.
+        let img = image::open(&normals_file).unwrap().into_rgb32f();
+        assert_eq!(img.dimensions(), (2808, 312));
+        let mut worst = 0.0f64;
+        for (f, frame) in frames.iter().enumerate().step_by(31) {
+            let want = garmentbake::geometry::vertex_normals(frame, triangles);
+            for (v, n) in want.iter().enumerate() {
+                // atan2(|t × n|, t · n) in f64: acos of an f32 dot near 1 is noise of ~0.3°.
+                let t = img
+                    .get_pixel(v as u32, f as u32)
+                    .0
+                    .map(|c| 2.0 * c as f64 - 1.0);
+                let n = n.map(f64::from);
+                let cross = [
+                    t[1] * n[2] - t[2] * n[1],
+                    t[2] * n[0] - t[0] * n[2],
+                    t[0] * n[1] - t[1] * n[0],
+                ];
+                let sin = cross.iter().map(|c| c * c).sum::<f64>().sqrt();
+                let cos = (0..3).map(|a| t[a] * n[a]).sum::<f64>();
+                worst = worst.max(sin.atan2(cos).to_degrees());
+            }
+        }
+        eprintln!(".vat.{ext}: normals texture at most {worst:.4} deg from the PC2's");
+        // Measured 0.0000° (EXR) and 0.0015° (PNG's 16-bit steps).
+        assert!(worst < 0.01, "{worst} deg");
+    }
+}
+
+/// `--out-units cm --out-up z` (Unreal's space): the PC2 is the metres Y-up PC2 turned (x, y, z) → (x,
+/// −z, y) and scaled by 100 (f32 rounding only); usd-core reads `metersPerUnit` 0.01 and
+/// `upAxis` Z off the USD cache and the same points; PyAlembic finds `units = cm`, `upAxis = Z`
+/// in the Alembic archive's user properties (Alembic has no field for them; PC2 and MDD neither).
+#[test]
+fn caches_in_centimetres_z_up_are_the_metre_y_up_cache_turned() {
+    let native = native_pc2();
+    let dir = out_dir("engine_units");
+    let (pc2, usd, abc) = (
+        dir.join("walk_cmz.pc2"),
+        dir.join("walk_cmz.usda"),
+        dir.join("body_cmz.abc"),
+    );
+    let eval = |out: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "eval",
+            "--model",
+            crate::bake::model().to_str().unwrap(),
+            "--motion",
+            s("motions/131_02.bvh"),
+            "--fps",
+            "30",
+            "--out-units",
+            "cm",
+            "--out-up",
+            "z",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        garmentbake_ok(&args);
+    };
+    eval(&pc2, &["--body-out", abc.to_str().unwrap()]);
+    eval(&usd, &[]);
+    let read = |p: &Path| exporters::pc2::read(&std::fs::read(p).unwrap()).unwrap().1;
+    let (metres, centimetres) = (read(native), read(&pc2));
+    assert_eq!(metres.len(), centimetres.len());
+    let mut worst = 0.0f32;
+    for (m, c) in metres.iter().zip(&centimetres) {
+        let turned: Vec<[f32; 3]> = m
+            .iter()
+            .map(|p| [p[0], -p[2], p[1]].map(|x| x * 100.0))
+            .collect();
+        worst = worst.max(max_distance(&turned, c));
+    }
+    eprintln!("cm Z-up PC2 vs the m Y-up PC2 turned and scaled: max {worst:.6} cm");
+    // f32 rounding of values up to ~150 cm: measured 0.0000 cm.
+    assert!(worst <= 2e-5, "{worst} cm");
+    let (ok, info) = usd_check(&["info", usd.to_str().unwrap()]);
+    assert!(ok, "{info}");
+    assert_eq!(info["upAxis"], "Z", "{info}");
+    assert!(
+        (info["metersPerUnit"].as_f64().unwrap() - 0.01).abs() < 1e-12,
+        "{info}"
+    );
+    let reference = dir.join("walk_cmz.f32");
+    write_reference(&reference, centimetres);
+    let (ok, points) = usd_check(&[
+        "points",
+        usd.to_str().unwrap(),
+        "--reference",
+        reference.to_str().unwrap(),
+    ]);
+    assert!(ok, "{points}");
+    assert_eq!(points["max_abs"], 0.0, "{points}");
+    let r = pyalembic(&abc, None);
+    let user = &r["meshes"][0]["user"];
+    assert_eq!(user["units"], "cm", "{r}");
+    assert_eq!(user["upAxis"], "Z", "{r}");
+}
+
+/// MDD in Blender's own MDD importer (the bundled `io_shape_mdd` add-on of Debian's Blender 3.4,
+/// headless: 2 s, so not opt-in): it reads the points as they are into the object's local
+/// coordinates (no axis swap, no handedness flip; the frame times are ignored, shape key i at
+/// frame i), so `eval`'s MDD on the OBJ imported Y-up shows every frame at the file's points
+/// (f32 rounding, measured 1.2e-7 m) and, in Blender's Z-up world, at our points turned (x, −z, y)
+/// with every face facing as ours (mean normal dot +1; a mirrored read gives −1).
+#[test]
+fn blender_reads_the_mdd_in_our_axes_and_handedness() {
+    let dir = out_dir("engine_mdd");
+    let mdd = dir.join("walk.mdd");
+    garmentbake_ok(&[
+        "eval",
+        "--model",
+        crate::bake::model().to_str().unwrap(),
+        "--motion",
+        s("motions/131_02.bvh"),
+        "--fps",
+        "4",
+        "--out",
+        mdd.to_str().unwrap(),
+    ]);
+    let json = dir.join("blender.json");
+    run_ok(
+        Command::new("blender")
+            .args(["-b", "--factory-startup", "--python"])
+            .arg(root().join("tools/blender/import_mdd.py"))
+            .arg("--")
+            .arg(sample("garments/skirt.obj"))
+            .arg(&mdd)
+            .args(["--frames", "0,5,20,41", "--out"])
+            .arg(&json),
+    );
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    eprintln!("Blender's MDD importer: {r}");
+    assert_eq!(r["frames_in_file"], 42, "{r}");
+    assert_eq!(r["shape_keys"], 42, "{r}");
+    for f in r["frames"].as_array().unwrap() {
+        assert!(f["local_max_abs"].as_f64().unwrap() < 1e-6, "{f}");
+        assert!(f["world_vs_turned_max_abs"].as_f64().unwrap() < 1e-6, "{f}");
+        assert!(f["mean_normal_dot"].as_f64().unwrap() > 0.999, "{f}");
+    }
+}

@@ -10,7 +10,7 @@ use crate::bake::sequence::{bake_sequence, SequenceReport};
 use crate::compute::Compute;
 use crate::eval::lbs_frames;
 use crate::geometry::PointIndex;
-use crate::io::point_cache::{read_pc2, write_cache, write_caches};
+use crate::io::point_cache::{read_pc2, write_cache_in, write_caches_in};
 use crate::metrics::versus::{distances_mm, Simulations, Versus};
 use crate::models::file::ModelFile;
 use crate::motion::{chain, load_clip, read_maps};
@@ -58,6 +58,8 @@ pub struct Request {
     pub view: Option<PathBuf>,
     /// Check what was written against the roll-out.
     pub validate: bool,
+    /// Units and up axis of the point caches written (`--out-units`, `--out-up`).
+    pub space: exporters::CacheSpace,
 }
 
 /// Plays `request`, writes its outputs through `outputs` (checked by the caller before any work,
@@ -70,6 +72,12 @@ pub fn run(request: &Request, outputs: OutputSet, feedback: &Feedback) -> Result
             "{}: --with-body needs a USD or Alembic --out ({}): PC2, MDD and glTF caches hold one mesh (use --body-out)",
             r.out.display(),
             FileKind::extension_list(&[FileKind::Usd, FileKind::Alembic], true)
+        );
+    }
+    if r.validate && (kind == Some(FileKind::Vat) || r.space != exporters::CacheSpace::NATIVE) {
+        bail!(
+            "{}: --validate reads glTF and point caches in metres, Y-up: drop --validate for a VAT or with --out-units / --out-up",
+            r.out.display()
         );
     }
     let device = r.compute.apply()?;
@@ -156,9 +164,9 @@ pub fn run(request: &Request, outputs: OutputSet, feedback: &Feedback) -> Result
                 ("garment", &file.garment, rollout.frames.as_slice()),
                 ("body", &body.mesh, b.as_slice()),
             ];
-            write_caches(out, &meshes, fps).map(|()| None)
+            write_caches_in(out, &meshes, fps, r.space).map(|()| None)
         }
-        _ => write_cache(out, &file.garment, &rollout.frames, fps).map(|()| None),
+        _ => write_cache_in(out, &file.garment, &rollout.frames, fps, r.space).map(|()| None),
     })?;
     let lbs = (r.lbs_out.is_some() || reference.is_some())
         .then(|| {
@@ -168,10 +176,12 @@ pub fn run(request: &Request, outputs: OutputSet, feedback: &Feedback) -> Result
         })
         .transpose()?;
     if let (Some(path), Some(lbs)) = (&r.lbs_out, &lbs) {
-        outputs.write(path, |p| write_cache(p, &file.garment, lbs, fps))?;
+        outputs.write(path, |p| {
+            write_cache_in(p, &file.garment, lbs, fps, r.space)
+        })?;
     }
     if let (Some(path), Some(b)) = (&r.body_out, &bodies) {
-        outputs.write(path, |p| write_cache(p, &body.mesh, b, fps))?;
+        outputs.write(path, |p| write_cache_in(p, &body.mesh, b, fps, r.space))?;
     }
     let view = match &r.view {
         Some(page) => {
