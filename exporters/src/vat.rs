@@ -314,7 +314,10 @@ fn mesh_asset(vat: &VertexAnimation, sidecar: &Sidecar, json: String) -> BakedAs
 mod tests {
     use super::*;
 
-    fn sample(frames: usize) -> (Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<[f32; 3]>) {
+    /// Rest points, frames of points, normals.
+    type Sample = (Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<[f32; 3]>);
+
+    fn sample(frames: usize) -> Sample {
         let rest = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
         let mut points = Vec::new();
         for f in 0..frames {

@@ -417,7 +417,7 @@ impl Writes {
     }
 }
 
-/// A point cache: .pc2, .mdd, .usda/.usdc/.usdz or .abc.
+/// A point cache: .pc2, .mdd, .usda/.usdc/.usdz, .abc, .vat.exr or .vat.png.
 pub const POINT_CACHE: Writes = Writes::Kinds(&exporters::POINT_CACHE_KINDS);
 
 /// A picture (`--out S.png`, `--png`, `--plot-*`).

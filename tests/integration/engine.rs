@@ -422,6 +422,7 @@ fn eval_writes_vertex_animation_textures_threejs_and_pngjs_rebuild_as_the_pc2() 
         );
         assert_eq!(side.fps, 30.0);
         let r = vat_read(&sidecar, pc2);
+        eprintln!(".vat.{ext}: {r}");
         let max = r["max_error"].as_f64().unwrap();
         eprintln!(
             ".vat.{ext}: {} frames x {} glb vertices, max {:.5} mm, mean {:.5} mm from the PC2 (sizes: positions {} bytes, PC2 {} bytes)",
@@ -452,6 +453,10 @@ fn eval_writes_vertex_animation_textures_threejs_and_pngjs_rebuild_as_the_pc2() 
             "{:.5} mm > {:.5} mm: {r}",
             max * 1e3,
             bound * 1e3
+        );
+        assert_eq!(
+            r["texels_outside"], 0,
+            "TEXCOORD_1 addresses off the texture: {r}"
         );
         // Normals: the texture's (image crate's decoder) against the PC2 frames' own normals.
         let img = image::open(&normals_file).unwrap().into_rgb32f();

@@ -17,7 +17,7 @@
 // seams, else its own index; so a wrong column in TEXCOORD_1 shows as an error.
 //
 // Prints (and writes with --out) {frames, vertices, width, height, fps, max_error, mean_error,
-// max_error_frame, normal_length_error, units}: distances in the file's units; the normals' length
+// max_error_frame, normal_length_error, texels_outside, units}: distances in the file's units; the normals' length
 // off 1 (their directions are checked against the positions in Rust).
 import fs from 'node:fs';
 import path from 'node:path';
@@ -109,11 +109,16 @@ let worstFrame = 0;
 let sum = 0;
 let count = 0;
 let normalWorst = 0;
+let outside = 0;
 for (let k = 0; k < rest.count; k++) {
 	const col = Math.round(uv1.getX(k) * side.width - 0.5);
 	const row0 = Math.round(uv1.getY(k) * side.height - 0.5);
 	const p = source ? source[k] : k;
 	for (let f = 0; f < side.frame_count; f++) {
+		if (col < 0 || col >= side.width || row0 + f < 0 || row0 + f >= side.height) {
+			outside++; // a texel address off the texture: counted, not measured
+			continue;
+		}
 		const t = positions.texel(col, row0 + f);
 		const r = [rest.getX(k), rest.getY(k), rest.getZ(k)];
 		const got = [0, 1, 2].map((a) => r[a] + lo[a] + t[a] * (hi[a] - lo[a]));
@@ -137,9 +142,10 @@ const result = {
 	height: positions.height,
 	fps: side.fps,
 	max_error: worst,
-	mean_error: sum / count,
+	mean_error: count ? sum / count : null,
 	max_error_frame: worstFrame,
 	normal_length_error: normalWorst,
+	texels_outside: outside,
 	units: side.units,
 };
 const text = JSON.stringify(result);
