@@ -775,7 +775,10 @@ pub fn load(path: &Path, device: Device) -> Result<ModelFile> {
 }
 
 fn is_pbns_tensor(name: &str) -> bool {
-    name.starts_with("mlp.") || name.starts_with("W.") || name == "psd" || name.starts_with("swing.")
+    name.starts_with("mlp.")
+        || name.starts_with("W.")
+        || name == "psd"
+        || name.starts_with("swing.")
 }
 
 /// The generative space from its tensors: the network rebuilt from the description (seeds,
@@ -858,7 +861,11 @@ fn load_pbns(t: &Tensors, info: &PbnsInfo) -> Result<Pbns> {
         joints: t.shaped("W.joints", &[n, k])?.to_kind(Kind::Int64),
         logits: t.shaped("W.logits", &[n, k])?,
         clamp: None,
-        swing: info.swing.as_ref().map(|s| load_swing(t, s)).transpose()?,
+        swing: info
+            .swing
+            .as_ref()
+            .map(|s| load_swing(t, s).map(Box::new))
+            .transpose()?,
     })
 }
 

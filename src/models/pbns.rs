@@ -53,7 +53,7 @@ pub struct Pbns {
     pub clamp: Option<(Tensor, Tensor)>,
     /// A learnt dynamic response (`train-swing`): more blend shapes whose weights follow the
     /// motion; `None` for the quasi-static PBNS.
-    pub swing: Option<Swing>,
+    pub swing: Option<Box<Swing>>,
 }
 
 /// What the forward pass returns: posed vertices and the rest-space PSD displacement (which the
@@ -243,10 +243,11 @@ impl Pbns {
 
     /// `X(θ)·D (+ Y·E)` in rest space, `[B, N, 3]`.
     pub fn displacement(&self, batch: &PoseBatch) -> Tensor {
-        let d = self
-            .coefficients(&batch.features)
-            .matmul(&self.psd)
-            .view([-1, self.shape.vertices as i64, 3]);
+        let d = self.coefficients(&batch.features).matmul(&self.psd).view([
+            -1,
+            self.shape.vertices as i64,
+            3,
+        ]);
         match (&self.swing, &batch.swing) {
             (Some(s), Some(y)) => d + s.displacement(y),
             (Some(_), None) => panic!("a swing model's batch needs its clip played in order"),

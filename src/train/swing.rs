@@ -204,11 +204,17 @@ impl Trainer {
             network.template.unsqueeze(0) + network.displacement(&batch.slice(s, n))
         });
         let mut swing = Swing::new(shape.clone(), mean, scale, device);
-        swing.basis = pose_modes(&rest, &network.template, settings.shapes);
+        let pinned = model.info.garment.pinned.clone();
+        let turns = joint_turns(&model.garment, &network.skin(), &skeleton, settings.shapes);
+        let rest_of = settings.shapes - turns.size()[0] as usize;
+        swing.basis = Tensor::cat(
+            &[turns, vibration_shapes(&model.garment, &pinned, rest_of)],
+            0,
+        )
+        .to_device(device);
         swing.set_trainable();
         let adam = Adam::new(&swing.parameters());
         let fabric = model.info.fabric.clone();
-        let pinned = model.info.garment.pinned.clone();
         let cloth = Cloth::new(&model.garment, &fabric, &pinned, device)?;
         let subset = nearest::body_subset(&model.body, &model.garment.positions, settings.reach);
         let mut correspondences = Correspondences::new(
@@ -248,7 +254,7 @@ impl Trainer {
             },
             history: Vec::new(),
         };
-        network.swing = Some(swing);
+        network.swing = Some(Box::new(swing));
         match &mut model.info.model {
             KindInfo::Pbns(p) => p.swing = Some(info),
             KindInfo::Dynamic(_) => unreachable!("checked above"),
@@ -485,33 +491,116 @@ impl Trainer {
     }
 }
 
-/// The swing's first blend shapes: the principal modes of the PBNS's own deformation over the
-/// training frames, each scaled to its spread. A random basis stretches the cloth in every
-/// direction, so inertia (tiny beside stretching) could never move it; these modes are the ways the
-/// pose already moves the garment (the hem pushed by a thigh), soft enough to swing.
-fn pose_modes(rest: &Tensor, template: &Tensor, shapes: usize) -> Tensor {
-    tch::no_grad(|| {
-        let frames = rest.size()[0];
-        // At most ~1,000 frames spread over the clips: the modes, not every frame, are needed.
-        let stride = (frames / 1000).max(1);
-        let idx = Tensor::arange_start_step(0, frames, stride, (Kind::Int64, rest.device()));
-        let d = (rest.index_select(0, &idx) - template.unsqueeze(0)).view([idx.size()[0], -1]);
-        let d = &d - d.mean_dim(0, true, Kind::Float);
-        let (_, sv, v) = d.svd(true, true);
-        let vt = v.transpose(0, 1);
-        let k = (shapes as i64).min(vt.size()[0]);
-        let spread = sv.narrow(0, 0, k) / (idx.size()[0] as f64).sqrt();
-        let modes = vt.narrow(0, 0, k) * spread.unsqueeze(1);
-        if k == shapes as i64 {
-            return modes;
+/// Blend shapes that turn the garment's part skinned to a joint about that joint (its skin weight
+/// times `a × (x − joint)`, for the three axes `a`), for the joints carrying most of the garment's
+/// skin, at most two thirds of `shapes`: a thigh's share of the skirt swinging about the hip is
+/// isometric to first order, what a lagging hem does; scaled to 1 cm at most.
+fn joint_turns(
+    mesh: &crate::geometry::TriMesh,
+    skin: &crate::rig::Skin,
+    skeleton: &crate::rig::Skeleton,
+    shapes: usize,
+) -> Tensor {
+    let n = mesh.vertex_count();
+    let mut share = vec![0.0f64; skeleton.joint_count()];
+    for (j, w) in skin.joint_indices.iter().zip(&skin.joint_weights) {
+        share[*j as usize] += f64::from(*w);
+    }
+    let mut joints: Vec<usize> = (0..share.len())
+        .filter(|&j| share[j] > 0.02 * n as f64)
+        .collect();
+    joints.sort_by(|a, b| share[*b].total_cmp(&share[*a]));
+    joints.truncate(2 * shapes / 9);
+    let rest = skeleton.rest_world();
+    let mut out = Vec::new();
+    for &j in &joints {
+        let c = rest[j].fixed_view::<3, 1>(0, 3).into_owned();
+        let weight: Vec<f32> = skin
+            .joint_indices
+            .chunks_exact(skin.influences)
+            .zip(skin.joint_weights.chunks_exact(skin.influences))
+            .map(|(js, ws)| {
+                js.iter()
+                    .zip(ws)
+                    .filter(|(&i, _)| i as usize == j)
+                    .map(|(_, w)| w)
+                    .sum()
+            })
+            .collect();
+        for axis in 0..3 {
+            let a = nalgebra::Vector3::from_fn(|r, _| if r == axis { 1.0f32 } else { 0.0 });
+            let field: Vec<nalgebra::Vector3<f32>> = (0..n)
+                .map(|v| {
+                    let x = nalgebra::Vector3::from(mesh.positions[v]);
+                    a.cross(&(x - c)) * weight[v]
+                })
+                .collect();
+            let peak = field
+                .iter()
+                .map(|u| u.norm())
+                .fold(0.0f32, f32::max)
+                .max(1e-9);
+            out.extend(
+                field
+                    .iter()
+                    .flat_map(|u| (u * (0.01 / peak)).iter().copied().collect::<Vec<_>>()),
+            );
         }
-        // Fewer frames than shapes: the rest start at zero.
-        let pad = Tensor::zeros(
-            [shapes as i64 - k, vt.size()[1]],
-            (Kind::Float, rest.device()),
-        );
-        Tensor::cat(&[modes, pad], 0)
-    })
+    }
+    let k = out.len() / (3 * n);
+    Tensor::from_slice(&out).view([k as i64, 3 * n as i64])
+}
+
+/// The swing's first blend shapes: the garment's slowest vibration shapes — the lowest
+/// eigenvectors of its edge graph's Laplacian with the pinned vertices held (Dirichlet), each
+/// along x, y and z, scaled to 1 cm at most. Near the pins they barely move and they grow towards
+/// the free edges: a skirt swinging from its waist. Inertia is tiny beside stretching, so a basis
+/// that stretches the cloth (random shapes, or the PBNS's own correctives) never moves: Y stays at
+/// zero and E then gets no gradient either.
+fn vibration_shapes(mesh: &crate::geometry::TriMesh, pinned: &[u32], shapes: usize) -> Tensor {
+    let n = mesh.vertex_count();
+    let held: std::collections::HashSet<u32> = pinned.iter().copied().collect();
+    let free: Vec<usize> = (0..n).filter(|v| !held.contains(&(*v as u32))).collect();
+    let mut slot = vec![usize::MAX; n];
+    for (i, &v) in free.iter().enumerate() {
+        slot[v] = i;
+    }
+    let m = free.len();
+    let mut lap = vec![0.0f64; m * m];
+    for &[a, b] in &crate::geometry::Topology::new(mesh).edges {
+        let (a, b) = (a as usize, b as usize);
+        for (p, q) in [(a, b), (b, a)] {
+            if slot[p] != usize::MAX {
+                lap[slot[p] * m + slot[p]] += 1.0;
+                if slot[q] != usize::MAX {
+                    lap[slot[p] * m + slot[q]] -= 1.0;
+                }
+            }
+        }
+    }
+    let lap = Tensor::from_slice(&lap).view([m as i64, m as i64]);
+    let (_, vectors) = lap.linalg_eigh("L");
+    let per_axis = shapes.div_ceil(3);
+    let vectors: Vec<f64> = Vec::try_from(
+        vectors
+            .narrow(1, 0, per_axis.min(m) as i64)
+            .transpose(0, 1)
+            .contiguous()
+            .view([-1]),
+    )
+    .expect("double tensor");
+    let mut out = vec![0.0f32; shapes * 3 * n];
+    for k in 0..shapes {
+        let (mode, axis) = (k / 3, k % 3);
+        let Some(phi) = vectors.get(mode * m..(mode + 1) * m) else {
+            continue;
+        };
+        let peak = phi.iter().fold(0.0f64, |a, b| a.max(b.abs())).max(1e-12);
+        for (i, &v) in free.iter().enumerate() {
+            out[k * 3 * n + 3 * v + axis] = (0.01 * phi[i] / peak) as f32;
+        }
+    }
+    Tensor::from_slice(&out).view([shapes as i64, 3 * n as i64])
 }
 
 impl Training for Trainer {
@@ -524,7 +613,7 @@ impl Training for Trainer {
     fn run_epoch(&mut self) -> Result<EpochLine, Blowup> {
         let start = Instant::now();
         let epoch = self.epoch();
-        if epoch > 0 && epoch % self.settings.refresh_every.max(1) == 0 {
+        if epoch > 0 && epoch.is_multiple_of(self.settings.refresh_every.max(1)) {
             self.refresh();
         }
         self.replay();

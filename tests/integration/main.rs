@@ -20,6 +20,7 @@ mod retarget;
 mod rigs;
 mod simulate;
 mod suite;
+mod swing;
 mod usd;
 mod validate;
 mod view;
