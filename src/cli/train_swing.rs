@@ -58,8 +58,9 @@ pub struct Args {
     /// Seed: same seed and inputs → the same model.
     #[arg(long, default_value_t = 0, help_heading = "Training")]
     pub seed: u64,
-    /// Weight of the inertia term (1: physical). 0 trains without dynamics: an ablation.
-    #[arg(long, default_value_t = 1.0, help_heading = "Advanced")]
+    /// The garment's mass in the dynamics, times the fabric's density (1: the fabric as it is,
+    /// which barely swings; 0 trains without dynamics, an ablation).
+    #[arg(long, default_value_t = Settings::recipe().inertia, help_heading = "Training")]
     pub inertia: f32,
     /// Continue from OUT's checkpoint (same inputs and settings) up to --epochs.
     #[arg(long, help_heading = "Training")]

@@ -55,16 +55,17 @@ impl Settings {
     /// The documented recipe (docs/swing.md).
     pub fn recipe() -> Settings {
         Settings {
-            epochs: 20,
+            epochs: 30,
             batch: 16,
             unroll: 3,
-            learning_rate: 1e-3,
+            learning_rate: 3e-3,
             width: 128,
             layers: 2,
             shapes: 32,
             lags: vec![0, 1, 2, 4, 8],
             fps: 30.0,
-            inertia: 1.0,
+            // The fabric's own density leaves the sample skirt all but still (docs/swing.md).
+            inertia: 100.0,
             seed: 0,
             candidates: 6,
             refresh_every: 2,
