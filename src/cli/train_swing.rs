@@ -1,6 +1,8 @@
 //! `garmentbake train-swing`: dynamics learnt from physics alone on top of a trained PBNS.
 
-use super::args::{output_set, ClipArgs, ComputeArgs, OutputArgs, Writes, MODEL};
+use super::args::{
+    non_negative, output_set, positive, ClipArgs, ComputeArgs, OutputArgs, Writes, MODEL,
+};
 use super::Execute;
 use crate::models::file::SwingEpoch;
 use crate::train::swing::{Inputs, Settings, Trainer};
@@ -47,7 +49,7 @@ pub struct Args {
     #[arg(long, default_value_t = Settings::recipe().unroll, help_heading = "Training")]
     pub unroll: usize,
     /// Initial Adam learning rate (cosine decay).
-    #[arg(long, default_value_t = Settings::recipe().learning_rate, help_heading = "Training")]
+    #[arg(long, default_value_t = Settings::recipe().learning_rate, value_parser = positive::<f64>(), help_heading = "Training")]
     pub lr: f64,
     /// Swing blend shapes (added to the PSD ones in a bake).
     #[arg(long, default_value_t = Settings::recipe().shapes, help_heading = "Training")]
@@ -60,7 +62,7 @@ pub struct Args {
     pub seed: u64,
     /// The garment's mass in the dynamics, times the fabric's density (1: the fabric as it is,
     /// which barely swings; 0 trains without dynamics, an ablation).
-    #[arg(long, default_value_t = Settings::recipe().inertia, help_heading = "Training")]
+    #[arg(long, default_value_t = Settings::recipe().inertia, value_parser = non_negative::<f32>(), help_heading = "Training")]
     pub inertia: f32,
     /// Continue from OUT's checkpoint (same inputs and settings) up to --epochs.
     #[arg(long, help_heading = "Training")]

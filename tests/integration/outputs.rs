@@ -408,6 +408,23 @@ fn every_output_is_checked_before_any_work() {
             [&body[..], &clip, &["--out", "m.safetensors"]].concat(),
         ),
         (
+            &["train-swing"],
+            "out",
+            "safetensors",
+            [&["--from", "missing.safetensors"][..], &clip].concat(),
+        ),
+        (
+            &["train-swing"],
+            "log",
+            "",
+            [
+                &["--from", "missing.safetensors"][..],
+                &clip,
+                &["--out", "m.safetensors"],
+            ]
+            .concat(),
+        ),
+        (
             &["train-dynamic"],
             "out",
             "safetensors",
