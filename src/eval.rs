@@ -219,3 +219,43 @@ impl ClipCoverage {
 /// How many of a clip's frames farthest from the training poses `eval` and `bake` name: the
 /// ones to look at before shipping.
 pub const FARTHEST: usize = 8;
+
+/// The network's blend-shape weights over `poses` that lie outside the training range (before
+/// clamping).
+pub fn outside_weights(
+    network: &Pbns,
+    coverage: &Coverage,
+    skeleton: &Skeleton,
+    poses: &[Vec<JointTransform>],
+    device: Device,
+) -> crate::models::coverage::OutsideWeights {
+    let batch = network.batch(skeleton, poses, device);
+    let weights = tch::no_grad(|| network.coefficients(&batch.features));
+    coverage.weights_outside(&weights)
+}
+
+/// How much the skinned body overlaps itself over the clip (vertices inside another part).
+#[derive(Serialize, Deserialize)]
+pub struct OverlapSummary {
+    pub median: usize,
+    pub most: usize,
+    pub worst_frame: usize,
+}
+
+impl OverlapSummary {
+    pub fn of(per_frame: &[usize]) -> OverlapSummary {
+        let (worst_frame, most) = per_frame
+            .iter()
+            .copied()
+            .enumerate()
+            .max_by_key(|&(f, n)| (n, std::cmp::Reverse(f)))
+            .unwrap_or((0, 0));
+        let mut sorted = per_frame.to_vec();
+        sorted.sort_unstable();
+        OverlapSummary {
+            median: sorted.get(sorted.len() / 2).copied().unwrap_or(0),
+            most,
+            worst_frame,
+        }
+    }
+}

@@ -101,14 +101,14 @@ pub fn parse_units(text: &str) -> Result<crate::rig::capture::Units, String> {
 }
 
 impl ClipArgs {
+    /// The clips as the pipeline's steps take them.
+    pub fn clips(&self) -> crate::pipeline::Clips {
+        crate::pipeline::Clips::new(&self.motions, &self.maps, self.fps, self.up, self.units)
+    }
+
     /// The maps and axes every clip of the command is read with.
     pub fn reader(&self) -> Result<crate::motion::ClipReader> {
-        Ok(
-            crate::motion::read_maps(&self.maps)?.with_axes(crate::rig::capture::ClipAxes {
-                up: self.up,
-                units: self.units,
-            }),
-        )
+        self.clips().reader()
     }
 
     /// The one clip of a command that reads exactly one, retargeted onto `skeleton` at --fps.
@@ -135,13 +135,7 @@ impl ClipArgs {
 
     /// The one clip of a command that reads exactly one.
     pub fn single(&self) -> Result<&Path> {
-        match self.motions.as_slice() {
-            [one] => Ok(one),
-            many => bail!(
-                "this command reads one --motion, got {}; run it once per clip",
-                many.len()
-            ),
-        }
+        crate::pipeline::single_motion(&self.motions)
     }
 }
 

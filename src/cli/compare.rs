@@ -6,7 +6,6 @@ use super::Execute;
 use crate::compare::{Report, Settings};
 use crate::compute::Compute;
 use crate::pipeline::compare::{run, Request};
-use crate::pipeline::Clips;
 use anyhow::{bail, Result};
 use std::path::PathBuf;
 
@@ -105,7 +104,7 @@ impl Execute for Args {
         let request = Request {
             body: self.body.clone(),
             garment: self.garment.clone(),
-            clips: Clips::new(&c.motions, &c.maps, c.fps, c.up, c.units),
+            clips: c.clips(),
             sims: self.sims.clone(),
             caches: self
                 .caches

@@ -2,11 +2,14 @@
 
 use super::args::{ClipArgs, ComputeArgs, OutputArgs};
 use super::Execute;
-use crate::eval::{compare_frames, lbs_frames, model_frames, ClipCoverage, Comparison};
+use crate::eval::{
+    compare_frames, lbs_frames, model_frames, outside_weights, ClipCoverage, Comparison,
+    OverlapSummary,
+};
 use crate::io::gltf_body::read_body;
 use crate::io::point_cache::write_cache_in;
 use crate::metrics::{body_edges_under, ClothGeometry, Inside, Metrics};
-use crate::models::coverage::{Coverage, OutsideWeights};
+use crate::models::coverage::OutsideWeights;
 use crate::models::file::check_skeleton;
 use anyhow::{bail, Result};
 use serde::{Deserialize, Serialize};
@@ -332,48 +335,8 @@ impl Execute for Args {
     }
 }
 
-/// The network's blend-shape weights over `poses` that lie outside the training range (before
-/// clamping).
-fn outside_weights(
-    network: &crate::models::Pbns,
-    coverage: &Coverage,
-    skeleton: &crate::rig::Skeleton,
-    poses: &[Vec<crate::rig::JointTransform>],
-    device: tch::Device,
-) -> OutsideWeights {
-    let batch = network.batch(skeleton, poses, device);
-    let weights = tch::no_grad(|| network.coefficients(&batch.features));
-    coverage.weights_outside(&weights)
-}
-
 /// Body skin within this distance of the garment at rest counts as under it (metres).
 const UNDER: f32 = 0.02;
-
-/// How much the skinned body overlaps itself over the clip (vertices inside another part).
-#[derive(Serialize, Deserialize)]
-pub struct OverlapSummary {
-    pub median: usize,
-    pub most: usize,
-    pub worst_frame: usize,
-}
-
-impl OverlapSummary {
-    fn of(per_frame: &[usize]) -> OverlapSummary {
-        let (worst_frame, most) = per_frame
-            .iter()
-            .copied()
-            .enumerate()
-            .max_by_key(|&(f, n)| (n, std::cmp::Reverse(f)))
-            .unwrap_or((0, 0));
-        let mut sorted = per_frame.to_vec();
-        sorted.sort_unstable();
-        OverlapSummary {
-            median: sorted.get(sorted.len() / 2).copied().unwrap_or(0),
-            most,
-            worst_frame,
-        }
-    }
-}
 
 fn print_coverage(c: &CoverageReport) {
     println!("{}", c.clip.line(&c.farthest));

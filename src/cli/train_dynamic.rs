@@ -7,7 +7,7 @@ use super::args::{
 use super::Execute;
 use crate::compute::Compute;
 use crate::pipeline::train_dynamic::{run, Request, Stage};
-use crate::pipeline::{Clips, Feedback};
+use crate::pipeline::Feedback;
 use anyhow::Result;
 use std::path::PathBuf;
 
@@ -209,7 +209,7 @@ impl Execute for Args {
             body: self.body.clone(),
             garment: self.garment.clone(),
             from: self.from.clone(),
-            clips: Clips::new(&c.motions, &c.maps, c.fps, c.up, c.units),
+            clips: c.clips(),
             sims: self.sims.clone(),
             preset: self.preset.clone(),
             latent: self.latent,

@@ -72,13 +72,18 @@ impl Clips {
 
     /// The one clip of a step that reads exactly one.
     pub fn single(&self) -> Result<&Path> {
-        match self.motions.as_slice() {
-            [one] => Ok(one),
-            many => bail!(
-                "this command reads one --motion, got {}; run it once per clip",
-                many.len()
-            ),
-        }
+        single_motion(&self.motions)
+    }
+}
+
+/// The one clip of `motions`, for a step that reads exactly one.
+pub fn single_motion(motions: &[PathBuf]) -> Result<&Path> {
+    match motions {
+        [one] => Ok(one),
+        many => bail!(
+            "this command reads one --motion, got {}; run it once per clip",
+            many.len()
+        ),
     }
 }
 
