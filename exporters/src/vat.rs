@@ -250,6 +250,85 @@ pub fn write(path: &Path, vat: &VertexAnimation) -> Result<Sidecar, VatError> {
     Ok(sidecar)
 }
 
+/// A VAT read back from its files, as an engine gets it.
+#[derive(Clone, Debug)]
+pub struct Played {
+    pub sidecar: Sidecar,
+    /// The `NAME.vat.glb` bytes.
+    pub glb: Vec<u8>,
+    /// Texels as stored (in `[0, 1]`, PNG's divided by 65535), RGB, row-major from the top row
+    /// (row = frame).
+    pub positions: Vec<f32>,
+    pub normals: Vec<f32>,
+}
+
+/// Reads the VAT that `path` names (`NAME.vat.exr`, `NAME.vat.png` or `NAME.vat.json`): the
+/// sidecar, then the files it names beside it, each texture checked against its size.
+pub fn read(path: &Path) -> Result<Played, VatError> {
+    let invalid = |p: &Path, reason: String| VatError::Invalid {
+        path: p.display().to_string(),
+        reason,
+    };
+    let name = path
+        .file_name()
+        .map_or(String::new(), |n| n.to_string_lossy().to_ascii_lowercase());
+    let json = if name.ends_with(".vat.json") {
+        path.to_path_buf()
+    } else {
+        match file_names(path) {
+            Some(files) => files[2].clone(),
+            None => {
+                return Err(invalid(
+                    path,
+                    "a VAT is named NAME.vat.exr, NAME.vat.png or NAME.vat.json".into(),
+                ))
+            }
+        }
+    };
+    let read = |p: &Path| {
+        std::fs::read(p).map_err(|e| {
+            invalid(
+                p,
+                format!("cannot read it: {}", crate::atomic::io_message(&e)),
+            )
+        })
+    };
+    let sidecar: Sidecar = serde_json::from_slice(&read(&json)?)
+        .map_err(|e| invalid(&json, format!("not a VAT sidecar: {e}")))?;
+    let beside = |n: &str| json.with_file_name(n);
+    let texels = |n: &str| -> Result<Vec<f32>, VatError> {
+        let p = beside(n);
+        let img = image::load_from_memory(&read(&p)?).map_err(|e| invalid(&p, e.to_string()))?;
+        if (img.width() as usize, img.height() as usize) != (sidecar.width, sidecar.height) {
+            return Err(invalid(
+                &p,
+                format!(
+                    "{}x{} texels, the sidecar says {}x{}",
+                    img.width(),
+                    img.height(),
+                    sidecar.width,
+                    sidecar.height
+                ),
+            ));
+        }
+        Ok(match sidecar.encoding.as_str() {
+            "uint16" => img
+                .into_rgb16()
+                .into_raw()
+                .into_iter()
+                .map(|t| f32::from(t) / 65535.0)
+                .collect(),
+            _ => img.into_rgb32f().into_raw(),
+        })
+    };
+    Ok(Played {
+        positions: texels(&sidecar.positions)?,
+        normals: texels(&sidecar.normals)?,
+        glb: read(&beside(&sidecar.mesh))?,
+        sidecar,
+    })
+}
+
 /// Texels in `[0, 1]`, row-major from the top row, as the encoding's file bytes.
 fn encode(
     encoding: Encoding,
@@ -383,6 +462,34 @@ mod tests {
             }
         }
         assert!(worst <= side.quantisation() * 1.01 + 1e-6, "{worst}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn reads_back_what_it_wrote() {
+        let dir = std::env::temp_dir().join(format!("gb-vat-read-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let (rest, points, normals) = sample(5);
+        for ext in ["exr", "png"] {
+            let path = dir.join(format!("t.vat.{ext}"));
+            let side = write(&path, &vat(&rest, &points, &normals)).unwrap();
+            let played = read(&dir.join("t.vat.json")).unwrap();
+            assert_eq!(played.sidecar, side);
+            assert_eq!(played.positions.len(), 3 * 3 * 5);
+            let mut worst = 0.0f32;
+            for (i, p) in points.iter().enumerate() {
+                for a in 0..3 {
+                    let t = played.positions[3 * i + a];
+                    let range = side.bounds_max[a] - side.bounds_min[a];
+                    let d = rest[i % 3][a] + side.bounds_min[a] + t * range;
+                    worst = worst.max((d - p[a]).abs());
+                }
+                assert!((played.normals[3 * i + 2] - 1.0).abs() < 1e-4);
+            }
+            assert!(worst <= side.quantisation() * 1.01 + 1e-6, "{ext}: {worst}");
+            assert_eq!(&played.glb[..4], b"glTF");
+        }
+        assert!(read(&dir.join("t.png")).is_err());
         let _ = std::fs::remove_dir_all(&dir);
     }
 

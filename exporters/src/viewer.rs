@@ -65,6 +65,9 @@ pub struct Page<'a> {
     pub reference: Option<Track>,
     /// Distance at the top of the colour scale.
     pub error_scale_mm: f32,
+    /// Vertex animation textures played on their own mesh in a vertex shader: the garment,
+    /// replacing the glTF's (`glb` may then be empty: the VAT alone).
+    pub vat: Option<&'a crate::vat::Played>,
 }
 
 /// The page's data block, read by viewer.js.
@@ -72,7 +75,7 @@ pub struct Page<'a> {
 #[serde(rename_all = "camelCase")]
 struct Data<'a> {
     title: &'a str,
-    glb: String,
+    glb: Option<String>,
     garment: Option<&'a str>,
     garment_is_bake: bool,
     vertex_map: Option<&'a [u32]>,
@@ -82,6 +85,41 @@ struct Data<'a> {
     /// The reference is this track (inlined once).
     reference_track: Option<usize>,
     error_scale_mm: f32,
+    vat: Option<VatData<'a>>,
+}
+
+/// A VAT as the page gets it: its glb, the sidecar's figures and both textures' texels.
+#[derive(Serialize)]
+#[serde(rename_all = "camelCase")]
+struct VatData<'a> {
+    glb: String,
+    width: usize,
+    height: usize,
+    fps: f32,
+    bounds_min: [f32; 3],
+    bounds_max: [f32; 3],
+    /// Little-endian float32 RGB texels, row-major from the top row (row = frame), base64.
+    positions: String,
+    normals: String,
+    name: &'a str,
+}
+
+impl<'a> From<&'a crate::vat::Played> for VatData<'a> {
+    fn from(v: &'a crate::vat::Played) -> Self {
+        let floats =
+            |t: &[f32]| base64::encode(t.iter().flat_map(|c| c.to_le_bytes()).collect::<Vec<u8>>());
+        VatData {
+            glb: base64::encode(&v.glb),
+            width: v.sidecar.width,
+            height: v.sidecar.height,
+            fps: v.sidecar.fps,
+            bounds_min: v.sidecar.bounds_min,
+            bounds_max: v.sidecar.bounds_max,
+            positions: floats(&v.positions),
+            normals: floats(&v.normals),
+            name: &v.sidecar.positions,
+        }
+    }
 }
 
 #[derive(Serialize)]
@@ -131,7 +169,7 @@ pub fn html(page: &Page) -> Result<String, ViewerError> {
     });
     let data = Data {
         title: &page.title,
-        glb: base64::encode(page.glb),
+        glb: (!page.glb.is_empty()).then(|| base64::encode(page.glb)),
         garment: page.garment.as_deref(),
         garment_is_bake: page.garment_is_bake,
         vertex_map: page.vertex_map.as_deref(),
@@ -144,6 +182,7 @@ pub fn html(page: &Page) -> Result<String, ViewerError> {
             .map(TrackData::from),
         reference_track,
         error_scale_mm: page.error_scale_mm,
+        vat: page.vat.map(VatData::from),
     };
     let modules: Vec<(&str, String)> = MODULES
         .iter()

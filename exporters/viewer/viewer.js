@@ -80,6 +80,7 @@ let bodies = []; // every other mesh
 const tracks = []; // { name, points, frames, data, mesh, checkbox }
 let reference = null;
 let vertexMap = null; // garment vertex -> cache point
+let vat = null; // { mesh, row, columns, positions, normals, min, range, frames } when a VAT plays
 
 function cachePoint(v) {
 	return vertexMap ? vertexMap[v] : v;
@@ -87,8 +88,96 @@ function cachePoint(v) {
 
 // ------------------------------------------------------------------ load
 function load() {
-	const glb = bytes(data.glb).buffer;
-	new GLTFLoader().parse(glb, '', start, (e) => say(`cannot read the glTF: ${e.message || e}`));
+	const failed = (e) => say(`cannot read the glTF: ${e.message || e}`);
+	const loaded = (gltf) => (data.vat ? loadVat(gltf) : start(gltf));
+	if (data.glb === null) loaded({ scene: new THREE.Group(), animations: [] });
+	else new GLTFLoader().parse(bytes(data.glb).buffer, '', loaded, failed);
+}
+
+// ------------------------------------------------------------------ vertex animation textures
+// A VAT (exporters/src/vat.rs, docs/caches.md) plays as an engine plays it: its glb's mesh at
+// rest, and a vertex shader that reads frame f's texel at TEXCOORD_1 + (0, f / height), adds
+// bounds_min + texel * (bounds_max - bounds_min) to the rest position, and takes the normal
+// 2 * texel - 1 from the normals texture. The texels are the files' (decoded by the binary), in
+// float textures sampled at texel centres.
+function loadVat(gltf) {
+	const v = data.vat;
+	new GLTFLoader().parse(bytes(v.glb).buffer, '', (own) => {
+		let mesh = null;
+		own.scene.traverse((o) => {
+			if (o.isMesh && !mesh) mesh = o;
+		});
+		if (!mesh || !mesh.geometry.attributes.uv1) {
+			say(`${v.name}: its glb has no mesh with a second UV set`);
+			return;
+		}
+		// The glTF's own garment (the caches' mesh of an eval / rollout page) gives way to it.
+		gltf.scene.traverse((o) => {
+			if (o.isMesh && o.name === data.garment) o.visible = false;
+		});
+		const texture = (b64) => {
+			const rgb = floats(b64);
+			const rgba = new Float32Array(v.width * v.height * 4);
+			for (let i = 0; i < v.width * v.height; i++) rgba.set(rgb.subarray(3 * i, 3 * i + 3), 4 * i);
+			const t = new THREE.DataTexture(rgba, v.width, v.height, THREE.RGBAFormat, THREE.FloatType);
+			t.minFilter = t.magFilter = THREE.NearestFilter;
+			t.generateMipmaps = false;
+			t.needsUpdate = true;
+			return t;
+		};
+		const min = new THREE.Vector3(...v.boundsMin);
+		const range = new THREE.Vector3(...v.boundsMax).sub(min);
+		const uv1 = mesh.geometry.attributes.uv1;
+		vat = {
+			mesh,
+			row: { value: 0 },
+			columns: Uint32Array.from({ length: uv1.count }, (_, i) => Math.round(uv1.getX(i) * v.width - 0.5)),
+			positions: floats(v.positions),
+			frames: v.height,
+			min,
+			range,
+		};
+		mesh.geometry.setAttribute('vatUv', uv1);
+		const m = material(GARMENT_COLORS[0]);
+		const uniforms = {
+			vatPositions: { value: texture(v.positions) },
+			vatNormals: { value: texture(v.normals) },
+			vatRow: vat.row,
+			vatMin: { value: min },
+			vatRange: { value: range },
+		};
+		m.onBeforeCompile = (shader) => {
+			Object.assign(shader.uniforms, uniforms);
+			shader.vertexShader =
+				'uniform sampler2D vatPositions;\nuniform sampler2D vatNormals;\nuniform float vatRow;\nuniform vec3 vatMin;\nuniform vec3 vatRange;\nattribute vec2 vatUv;\n' +
+				shader.vertexShader
+					.replace(
+						'#include <beginnormal_vertex>',
+						'vec2 vatAt = vec2(vatUv.x, vatUv.y + vatRow);\nvec3 objectNormal = texture2D(vatNormals, vatAt).rgb * 2.0 - 1.0;',
+					)
+					.replace('#include <begin_vertex>', 'vec3 transformed = position + vatMin + texture2D(vatPositions, vatAt).rgb * vatRange;');
+		};
+		mesh.material = m;
+		mesh.frustumCulled = false;
+		mesh.name = 'garment';
+		gltf.scene.add(mesh);
+		data.garment = 'garment';
+		data.garmentIsBake = true;
+		if (!data.fps && gltf.animations.length === 0) data.fps = v.fps;
+		start(gltf);
+	}, (e) => say(`cannot read ${v.name}'s glb: ${e.message || e}`));
+}
+
+// World position of VAT vertex v at the shown row, as the shader computes it.
+function vatVertex(v, out) {
+	const f = Math.round(vat.row.value * vat.frames);
+	const t = (f * data.vat.width + vat.columns[v]) * 3;
+	const p = vat.positions;
+	out.fromBufferAttribute(vat.mesh.geometry.attributes.position, v);
+	out.x += vat.min.x + p[t] * vat.range.x;
+	out.y += vat.min.y + p[t + 1] * vat.range.y;
+	out.z += vat.min.z + p[t + 2] * vat.range.z;
+	return out.applyMatrix4(vat.mesh.matrixWorld);
 }
 
 function start(gltf) {
@@ -97,6 +186,7 @@ function start(gltf) {
 		if (!o.isMesh) return;
 		// Skinned bounds are the rest pose's: never cull a posed garment.
 		o.frustumCulled = false;
+		if (vat && o !== vat.mesh && o.name === 'garment') return; // the caches' mesh, hidden
 		if (!garment && (data.garment === null || o.name === data.garment)) garment = o;
 		else bodies.push(o);
 	});
@@ -104,7 +194,7 @@ function start(gltf) {
 		say('this glTF has no mesh to show');
 		return;
 	}
-	garment.material = material(GARMENT_COLORS[0]);
+	if (!vat) garment.material = material(GARMENT_COLORS[0]);
 	garment.visible = data.garmentIsBake;
 	for (const b of bodies) b.material = material(BODY_GREY);
 	if (data.vertexMap) vertexMap = Uint32Array.from(data.vertexMap);
@@ -186,7 +276,7 @@ function selectClip(i) {
 
 function setupScrub() {
 	if (state.clips.length === 0) {
-		state.frames = Math.max(1, ...tracks.map((t) => t.frames));
+		state.frames = Math.max(1, vat ? vat.frames : 1, ...tracks.map((t) => t.frames));
 	}
 	$('scrub').max = String(state.frames - 1);
 }
@@ -207,6 +297,7 @@ function pose() {
 		mixer.update(0);
 	}
 	scene.updateMatrixWorld(true);
+	if (vat) vat.row.value = Math.min(frame, vat.frames - 1) / vat.frames;
 	const showBake = data.garmentIsBake && (!$('bake') || $('bake').checked);
 	garment.visible = showBake;
 	const spacing = $('layout').value === 'side' ? sideSpacing() : 0;
@@ -245,6 +336,7 @@ function sideSpacing() {
 
 // World position of vertex v of a mesh as the GPU draws it (morphs, then skinning, then the node).
 function worldVertex(mesh, v, out) {
+	if (vat && mesh === vat.mesh) return vatVertex(v, out);
 	if (mesh.isSkinnedMesh || mesh.morphTargetInfluences) mesh.getVertexPosition(v, out);
 	else out.fromBufferAttribute(mesh.geometry.attributes.position, v);
 	return out.applyMatrix4(mesh.matrixWorld);

@@ -5,8 +5,39 @@
 //! stacked offsets `O = X D` (frames × 3N). `D` is tall (3N × K after transposing), so the SVD is
 //! taken of the small `X Rᵀ` where `Dᵀ = Q R` (thin QR): `O = U Σ (Q V)ᵀ`.
 
+use anyhow::{bail, Result};
 use exporters::asset::SHORT_STEPS;
 use nalgebra::DMatrix;
+
+/// How many blend shapes to keep: the target budget of every bake (`bake`, `rollout --out
+/// x.glb`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Targets {
+    /// Every direction the offsets have (a PBNS bake without pruning: the network's own basis,
+    /// uncompressed, K = MLP width).
+    Full,
+    Count(usize),
+    /// The fewest whose max offset error over the baked frames is within this many metres.
+    Tolerance(f32),
+}
+
+impl Targets {
+    /// The budget `--max-targets K` / `--tolerance-mm T` ask for (K at least 1, T positive;
+    /// `--max-targets` wins), `otherwise` with neither.
+    pub fn from_flags(
+        max_targets: Option<usize>,
+        tolerance_mm: Option<f32>,
+        otherwise: Targets,
+    ) -> Result<Targets> {
+        Ok(match (max_targets, tolerance_mm) {
+            (Some(0), _) => bail!("--max-targets must be at least 1"),
+            (Some(k), _) => Targets::Count(k),
+            (None, Some(t)) if t > 0.0 => Targets::Tolerance(t * 1e-3),
+            (None, Some(t)) => bail!("--tolerance-mm must be positive, got {t}"),
+            (None, None) => otherwise,
+        })
+    }
+}
 
 /// The network's basis and its coefficients over the frames to bake.
 pub struct UsedOffsets<'a> {
@@ -132,21 +163,32 @@ impl Spectrum {
 
     /// The smallest count whose max error is within `tolerance` (m); the full rank otherwise.
     pub fn within(&self, reference: &DMatrix<f32>, tolerance: f32) -> Compressed {
-        self.fewest(tolerance, |count| self.truncate(reference, count))
+        self.budget(reference, Targets::Tolerance(tolerance), None)
     }
 
-    /// As [`Spectrum::within`], with the targets scaled to a largest component of 1
-    /// ([`Compressed::normalized`]) and, with `grid`, on the 16-bit grid: the rounding is
-    /// counted in the error the count must meet.
-    pub fn within_normalized(
+    /// What `budget` keeps: `Count(k)` the k strongest directions (all of them when fewer),
+    /// `Tolerance(t)` the fewest whose max error is within t (m), `Full` every direction. With
+    /// `unit = Some(grid)` the targets are scaled to a largest component of 1
+    /// ([`Compressed::normalized`]) and, with `grid`, put on the 16-bit grid: the rounding is
+    /// counted in the error a tolerance must meet and in the error reported.
+    pub fn budget(
         &self,
         reference: &DMatrix<f32>,
-        tolerance: f32,
-        grid: bool,
+        budget: Targets,
+        unit: Option<bool>,
     ) -> Compressed {
-        self.fewest(tolerance, |count| {
-            self.truncate(reference, count).normalized(reference, grid)
-        })
+        let keep = |count| {
+            let kept = self.truncate(reference, count);
+            match unit {
+                Some(grid) => kept.normalized(reference, grid),
+                None => kept,
+            }
+        };
+        match budget {
+            Targets::Full => keep(self.rank()),
+            Targets::Count(k) => keep(k),
+            Targets::Tolerance(t) => self.fewest(t, keep),
+        }
     }
 
     /// Bisects on the count: the error falls as targets are added.
@@ -325,7 +367,7 @@ mod tests {
         let (basis, coefficients) = fixture();
         let reference = offset_matrix(&basis, &coefficients);
         let s = spectrum_of(&reference);
-        let picked = s.within_normalized(&reference, 1e-5, true);
+        let picked = s.budget(&reference, Targets::Tolerance(1e-5), Some(true));
         assert_eq!(picked.targets.len(), 2);
         for target in &picked.targets {
             let largest = target.iter().flatten().fold(0.0f32, |m, v| m.max(v.abs()));

@@ -18,15 +18,7 @@ use tch::{Device, Kind};
 /// Garment colour in viewers.
 pub const GARMENT_COLOR: [f32; 3] = [0.25, 0.45, 0.8];
 
-/// How many blend shapes to keep.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Targets {
-    /// The network's own basis, uncompressed (K = MLP width).
-    Full,
-    Count(usize),
-    /// The fewest whose max offset error over the baked clips is within this many metres.
-    Tolerance(f32),
-}
+pub use super::compress::Targets;
 
 pub struct BakeOptions {
     pub targets: Targets,
@@ -128,12 +120,8 @@ pub fn bake(
             let c = spectrum.truncate(&reference, used_rank);
             (c.targets, c.weights)
         }
-        Targets::Count(k) => {
-            let c = spectrum.truncate(&reference, k);
-            (c.targets, c.weights)
-        }
-        Targets::Tolerance(t) => {
-            let c = spectrum.within(&reference, t);
+        budget => {
+            let c = spectrum.budget(&reference, budget, None);
             (c.targets, c.weights)
         }
     };

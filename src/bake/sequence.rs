@@ -6,7 +6,7 @@
 //! ([`super::compress::spectrum_of`]) into the fewest targets within a tolerance, their weights
 //! animated per frame.
 
-use super::compress::{spectrum_of, FromZero};
+use super::compress::{spectrum_of, FromZero, Targets};
 use super::normals;
 use super::pbns::GARMENT_COLOR;
 use super::{animation_asset, moved_by, skeleton_asset, skinned_mesh_asset};
@@ -31,19 +31,24 @@ pub struct SequenceReport {
     pub max_weight: f32,
     /// The targets are 16-bit (KHR_mesh_quantization).
     pub quantized: bool,
+    /// The count asked for (`--max-targets`), when a count and not a tolerance chose the
+    /// targets: `max_error_m` is then what the budget costs.
+    #[serde(default)]
+    pub max_targets: Option<usize>,
 }
 
 /// Bakes `frames` (world positions, the garment's vertex order) played over `animation` (the
-/// body's poses, one per frame) with `skin`, keeping the fewest blend shapes whose replay stays
-/// within `tolerance` metres of every frame. `quantize`: the targets on the 16-bit grid a glTF
-/// stores under KHR_mesh_quantization (half the bytes; the rounding counts in the tolerance).
+/// body's poses, one per frame) with `skin`, keeping the blend shapes `budget` asks for (a count,
+/// or the fewest whose replay stays within a tolerance in metres of every frame). `quantize`: the
+/// targets on the 16-bit grid a glTF stores under KHR_mesh_quantization (half the bytes; the
+/// rounding counts in the tolerance and in the error reported).
 pub fn bake_sequence(
     skeleton: &Skeleton,
     garment: &TriMesh,
     skin: &Skin,
     animation: &SkelAnimation,
     frames: &[Vec<[f32; 3]>],
-    tolerance: f32,
+    budget: Targets,
     quantize: bool,
 ) -> Result<(BakedAsset, SequenceReport)> {
     check_sizes(garment, animation, frames)?;
@@ -52,7 +57,7 @@ pub fn bake_sequence(
     let spectrum = spectrum_of(&residuals);
     // Convex blends of rigid transforms never enlarge a rest-space error, so the rest-space
     // tolerance bounds the world-space one; the world error is measured below all the same.
-    let mut kept = spectrum.within_normalized(&residuals, tolerance, quantize);
+    let mut kept = spectrum.budget(&residuals, budget, Some(quantize));
     // Weights from 0 up (the base mesh takes the rest): readers that clamp them play it too.
     let FromZero { base, rest_weights } = kept.weights_from_zero();
     let base = moved_by(garment, &base);
@@ -104,6 +109,10 @@ pub fn bake_sequence(
         mean_error_m,
         max_weight: kept.weights.iter().flatten().fold(0.0, |m, &w| m.max(w)),
         quantized: quantize,
+        max_targets: match budget {
+            Targets::Count(k) => Some(k),
+            _ => None,
+        },
     };
     Ok((asset, report))
 }
@@ -263,10 +272,10 @@ mod tests {
                 skin.skin_points(&moved, &skeleton.skinning_matrices(pose))
             })
             .collect();
+        let tol = Targets::Tolerance(1e-5);
         for quantize in [false, true] {
             let (asset, report) =
-                bake_sequence(&skeleton, &mesh, &skin, &animation, &frames, 1e-5, quantize)
-                    .unwrap();
+                bake_sequence(&skeleton, &mesh, &skin, &animation, &frames, tol, quantize).unwrap();
             // Un-skinned, the residuals span the two modes only (left in world space, the
             // skinning's rotations would need targets of their own); on the 16-bit grid too.
             assert_eq!(report.targets, 2, "{report:?}");
@@ -279,7 +288,24 @@ mod tests {
             );
             asset.check().unwrap();
         }
+        // A count keeps that many whatever they cost, and the report says what they cost.
+        let (asset, one) = bake_sequence(
+            &skeleton,
+            &mesh,
+            &skin,
+            &animation,
+            &frames,
+            Targets::Count(1),
+            true,
+        )
+        .unwrap();
+        assert_eq!((one.targets, one.max_targets), (1, Some(1)), "{one:?}");
+        assert_eq!(asset.meshes[0].blend_shapes.len(), 1);
+        assert!(
+            one.max_error_m > 1e-4,
+            "one target cannot carry two modes: {one:?}"
+        );
         let wrong = &frames[..frames_n - 1];
-        assert!(bake_sequence(&skeleton, &mesh, &skin, &animation, wrong, 1e-5, true).is_err());
+        assert!(bake_sequence(&skeleton, &mesh, &skin, &animation, wrong, tol, true).is_err());
     }
 }

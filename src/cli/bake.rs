@@ -8,7 +8,7 @@ use crate::eval::ClipCoverage;
 
 use crate::motion::load_clip;
 use crate::validate::Validation;
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
@@ -154,13 +154,7 @@ impl Execute for Args {
             .iter()
             .map(|p| load_clip(p, &maps, model.skeleton(), fps).map(|c| c.animation))
             .collect::<Result<Vec<_>>>()?;
-        let targets = match (self.max_targets, self.tolerance_mm) {
-            (Some(0), _) => bail!("--max-targets must be at least 1"),
-            (Some(k), _) => Targets::Count(k),
-            (None, Some(t)) if t > 0.0 => Targets::Tolerance(t * 1e-3),
-            (None, Some(t)) => bail!("--tolerance-mm must be positive, got {t}"),
-            (None, None) => Targets::Full,
-        };
+        let targets = Targets::from_flags(self.max_targets, self.tolerance_mm, Targets::Full)?;
         let opts = BakeOptions {
             targets,
             influences: self.influences,

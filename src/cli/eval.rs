@@ -216,6 +216,7 @@ impl Execute for Args {
         }
         let view = match &self.view {
             Some(page) => {
+                let vat = crate::pipeline::view::staged_vat(&outputs, &self.out)?;
                 let bytes = outputs.write(page, |p| {
                     crate::pipeline::view::cache_page(
                         p,
@@ -223,6 +224,7 @@ impl Execute for Args {
                         (&anim.name, anim.fps, &poses),
                         ("network", &garment),
                         None,
+                        vat.as_ref(),
                     )
                 })?;
                 Some((page.clone(), bytes))

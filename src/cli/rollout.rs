@@ -4,6 +4,7 @@
 
 use super::args::{output_set, CollisionFixArgs, ComputeArgs, OutputArgs, Writes, POINT_CACHE};
 use super::Execute;
+use crate::bake::compress::Targets;
 use crate::compute::Compute;
 use crate::pipeline::rollout::{run, Request};
 use crate::pipeline::Feedback;
@@ -60,9 +61,13 @@ pub struct Args {
     #[arg(long)]
     pub out: PathBuf,
     /// glTF output: keep the fewest blend shapes whose replay stays within this distance (mm) of
-    /// every rolled-out vertex.
+    /// every rolled-out vertex (and --validate's limit).
     #[arg(long, default_value_t = 1.0, value_parser = super::args::positive::<f32>())]
     pub tolerance_mm: f32,
+    /// glTF output: keep this many blend shapes (the strongest; 8 is what every glTF client
+    /// must support) instead of a tolerance; the replay error they cost is printed.
+    #[arg(long, conflicts_with = "tolerance_mm")]
+    pub max_targets: Option<usize>,
     /// glTF output: store the blend shapes as 32-bit floats instead of 16-bit integers. By
     /// default they are quantized (KHR_mesh_quantization: half the bytes, the rounding counted
     /// in --tolerance-mm), which three.js and Blender read (both checked) as do most engines'
@@ -137,6 +142,8 @@ impl Execute for Args {
             ("--body-out", self.body_out.as_deref(), POINT_CACHE),
             ("--view", self.view.as_deref(), Writes::Page),
         ])?;
+        let tolerance = Some(self.tolerance_mm);
+        let targets = Targets::from_flags(self.max_targets, tolerance, Targets::Full)?;
         let request = Request {
             model: self.model.clone(),
             compute: Compute::new(&self.compute.device, self.compute.threads),
@@ -147,6 +154,7 @@ impl Execute for Args {
             frames: self.frames,
             settings: self.collision.settings(!self.no_collision_fix)?,
             out: self.out.clone(),
+            targets,
             tolerance_mm: self.tolerance_mm,
             float_targets: self.float_targets,
             body_out: self.body_out.clone(),

@@ -3,7 +3,9 @@
 
 use super::args::{output_set, OutputArgs, Writes};
 use super::Execute;
-use crate::pipeline::view::{file_name, read_glb, serve, write_page, CacheReport, Scene};
+use crate::pipeline::view::{
+    file_name, is_vat, read_glb, read_vat, serve, vat_page, write_page, CacheReport, Scene,
+};
 use anyhow::{bail, Result};
 use exporters::viewer::Page;
 use serde::Serialize;
@@ -24,7 +26,9 @@ use std::path::PathBuf;
 #[command(group(clap::ArgGroup::new("target").required(true).args(["out", "serve"])))]
 pub struct Args {
     /// Binary glTF (.glb), e.g. from `garmentbake bake`; its mesh named `garment` (else the first)
-    /// is the one caches play on.
+    /// is the one caches play on. Or vertex animation textures (NAME.vat.exr / .vat.png /
+    /// .vat.json from `eval`, `rollout`, `interpolate`): their mesh played by the textures in a
+    /// vertex shader, as an engine plays them.
     pub file: PathBuf,
     /// Point cache(s) (.pc2) of the garment to play beside or instead of the bake; repeat.
     #[arg(long = "with", help_heading = "Inputs")]
@@ -86,7 +90,16 @@ impl Execute for Args {
             bail!("--fps must be positive");
         }
         let outputs = output_set(&[("--out", self.out.as_deref(), Writes::Page)])?;
-        let glb = read_glb(&self.file)?;
+        let vat = is_vat(&self.file)
+            .then(|| read_vat(&self.file))
+            .transpose()?;
+        if vat.is_some() && (!self.with.is_empty() || self.error_vs.is_some()) {
+            bail!("--with and --error-vs play caches on a glb: a VAT page shows the VAT alone");
+        }
+        let glb = match &vat {
+            Some(v) => v.glb.clone(),
+            None => read_glb(&self.file)?,
+        };
         let scene = Scene::of(&glb, &self.file)?;
         let caches = self
             .with
@@ -98,16 +111,23 @@ impl Execute for Args {
             .as_deref()
             .map(|p| scene.cache(p))
             .transpose()?;
-        let page = Page {
-            title: file_name(&self.file),
-            glb: &glb,
-            garment: Some(scene.garment.clone()),
-            garment_is_bake: true,
-            vertex_map: scene.vertex_map.clone(),
-            fps: self.fps,
-            tracks: caches.iter().map(|c| c.1.clone()).collect(),
-            reference: reference.as_ref().map(|c| c.1.clone()),
-            error_scale_mm: self.error_scale_mm,
+        let page = match &vat {
+            Some(v) => Page {
+                fps: self.fps.or(Some(v.sidecar.fps)),
+                ..vat_page(v, file_name(&self.file))
+            },
+            None => Page {
+                title: file_name(&self.file),
+                glb: &glb,
+                garment: Some(scene.garment.clone()),
+                garment_is_bake: true,
+                vertex_map: scene.vertex_map.clone(),
+                fps: self.fps,
+                tracks: caches.iter().map(|c| c.1.clone()).collect(),
+                reference: reference.as_ref().map(|c| c.1.clone()),
+                error_scale_mm: self.error_scale_mm,
+                vat: None,
+            },
         };
         let report = |out: Option<PathBuf>, bytes: u64| Report {
             out,

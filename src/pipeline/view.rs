@@ -8,6 +8,8 @@ use crate::geometry::TriMesh;
 use crate::io::point_cache::read_pc2;
 use crate::rig::{JointTransform, SkelAnimation};
 use anyhow::{bail, Context, Result};
+use exporters::atomic::OutputSet;
+use exporters::vat::Played;
 use exporters::viewer::{Page, Track};
 use serde::Serialize;
 use std::io::{BufRead, BufReader, Write};
@@ -43,6 +45,42 @@ pub fn file_name(path: &Path) -> String {
         || path.display().to_string(),
         |n| n.to_string_lossy().into(),
     )
+}
+
+/// Whether `path` names vertex animation textures (`NAME.vat.exr`, `.vat.png`, `.vat.json`).
+pub fn is_vat(path: &Path) -> bool {
+    let name = file_name(path).to_ascii_lowercase();
+    exporters::vat::Encoding::of(path).is_some() || name.ends_with(".vat.json")
+}
+
+/// The VAT `path` names, read back from its files (sidecar, textures, glb).
+pub fn read_vat(path: &Path) -> Result<Played> {
+    exporters::vat::read(path).map_err(anyhow::Error::from)
+}
+
+/// The VAT an `--out` wrote, read from where `outputs` staged it (before the set is committed):
+/// what a `--view` page of that command plays. None when `out` is no VAT.
+pub fn staged_vat(outputs: &OutputSet, out: &Path) -> Result<Option<Played>> {
+    if !is_vat(out) {
+        return Ok(None);
+    }
+    Ok(Some(read_vat(&outputs.staged(out)?)?))
+}
+
+/// The page of a VAT alone: its glb's mesh played by its textures at the sidecar's rate.
+pub fn vat_page<'a>(vat: &'a Played, title: String) -> Page<'a> {
+    Page {
+        title,
+        glb: &[],
+        garment: None,
+        garment_is_bake: true,
+        vertex_map: None,
+        fps: Some(vat.sidecar.fps),
+        tracks: Vec::new(),
+        reference: None,
+        error_scale_mm: 10.0,
+        vat: Some(vat),
+    }
 }
 
 pub fn read_glb(path: &Path) -> Result<Vec<u8>> {
@@ -189,6 +227,7 @@ pub fn glb_page(out: &Path, glb: &[u8], title: &str) -> Result<u64> {
         tracks: Vec::new(),
         reference: None,
         error_scale_mm: 10.0,
+        vat: None,
     };
     write_page(out, &page)
 }
@@ -233,13 +272,16 @@ pub type Cache<'a> = (&'a str, &'a [Vec<[f32; 3]>]);
 
 /// `--view PAGE.html` of eval and rollout: the body over the clip and the written cache on the
 /// garment; with a reference (rollout --reference: the simulation), the reference beside it and
-/// error colours against it. Returns the size of the page.
+/// error colours against it. With `vat` (the command wrote vertex animation textures, see
+/// [`staged_vat`]) the page plays the VAT's own mesh and textures instead of the cache. Returns
+/// the size of the page.
 pub fn cache_page(
     out: &Path,
     (body, garment): (&Body, &TriMesh),
     (clip, fps, poses): (&str, f32, &[Vec<JointTransform>]),
     cache: Cache,
     reference: Option<Cache>,
+    vat: Option<&Played>,
 ) -> Result<u64> {
     let glb = cache_scene(body, garment, clip, fps, poses);
     let track = |(name, frames): Cache| Track {
@@ -254,9 +296,14 @@ pub fn cache_page(
         garment_is_bake: false,
         vertex_map: None,
         fps: Some(fps),
-        tracks: std::iter::once(cache).chain(reference).map(track).collect(),
+        tracks: std::iter::once(cache)
+            .filter(|_| vat.is_none())
+            .chain(reference)
+            .map(track)
+            .collect(),
         reference: reference.map(track),
         error_scale_mm: 50.0,
+        vat,
     };
     write_page(out, &page)
 }

@@ -114,11 +114,19 @@ fn the_pbns_bake_opens_at_rest_and_its_morph_normals_follow_the_folds_in_threejs
     );
 }
 
-/// The roll-out's compressed glTF (`rollout --out x.glb`, the same `bake::sequence` as any baked
-/// sequence): the same two properties on a roll-out of a fitted motion model.
-#[test]
-fn the_rollout_gltf_opens_at_rest_and_its_morph_normals_follow_the_folds_in_threejs() {
-    let (dir, sim, _) = crate::dynamic::untrained_space("engine_rollout");
+/// A fitted motion model (0 epochs, the linear dynamics) of the six simulated frames, made once
+/// for the roll-out tests here: (its folder, the simulation, the model).
+fn rollout_model() -> &'static (std::path::PathBuf, std::path::PathBuf, std::path::PathBuf) {
+    static MODEL: std::sync::OnceLock<(
+        std::path::PathBuf,
+        std::path::PathBuf,
+        std::path::PathBuf,
+    )> = std::sync::OnceLock::new();
+    MODEL.get_or_init(|| fitted_motion_model("engine_rollout"))
+}
+
+fn fitted_motion_model(test: &str) -> (std::path::PathBuf, std::path::PathBuf, std::path::PathBuf) {
+    let (dir, sim, _) = crate::dynamic::untrained_space(test);
     let (model, _) = crate::dynamic::motion_model(
         &dir,
         &sim,
@@ -131,24 +139,44 @@ fn the_rollout_gltf_opens_at_rest_and_its_morph_normals_follow_the_folds_in_thre
             "--no-pose-settle",
         ],
     );
+    (dir, sim, model)
+}
+
+/// `rollout` of `model` on 131_01 from the simulation's first frame, `frames` frames, into
+/// `out`, with `extra` flags.
+fn rollout_args<'a>(
+    model: &'a Path,
+    sim: &'a Path,
+    frames: &'a str,
+    out: &'a Path,
+    extra: &[&'a str],
+) -> Vec<&'a str> {
+    let mut args = vec![
+        "rollout",
+        "--model",
+        model.to_str().unwrap(),
+        "--motion",
+        s("motions/131_01.bvh"),
+        "--init",
+        sim.to_str().unwrap(),
+        "--frames",
+        frames,
+        "--threads",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    args
+}
+
+/// The roll-out's compressed glTF (`rollout --out x.glb`, the same `bake::sequence` as any baked
+/// sequence): the same two properties on a roll-out of a fitted motion model.
+#[test]
+fn the_rollout_gltf_opens_at_rest_and_its_morph_normals_follow_the_folds_in_threejs() {
+    let (dir, sim, model) = rollout_model();
     let roll = |out: &Path, extra: &[&str]| {
-        let mut args = vec![
-            "rollout",
-            "--model",
-            model.to_str().unwrap(),
-            "--motion",
-            s("motions/131_01.bvh"),
-            "--init",
-            sim.to_str().unwrap(),
-            "--frames",
-            "6",
-            "--threads",
-            "1",
-            "--out",
-            out.to_str().unwrap(),
-            "--json",
-        ];
-        args.extend_from_slice(extra);
+        let args = rollout_args(model, sim, "6", out, &[extra, &["--json"]].concat());
         garmentbake_json(&args)
     };
     let glb = dir.join("roll.glb");
@@ -157,7 +185,7 @@ fn the_rollout_gltf_opens_at_rest_and_its_morph_normals_follow_the_folds_in_thre
     assert!(ok, "{text}");
     let targets = every_target_has_normals(&glb);
     assert_eq!(report["baked"]["targets"], targets as u64, "{report}");
-    let rest = rest_error(&glb, &model);
+    let rest = rest_error(&glb, model);
     eprintln!(
         "roll-out glTF ({targets} targets) at rest in three.js: {:.5} mm from the rest garment",
         rest * 1e3
@@ -204,6 +232,85 @@ fn the_rollout_gltf_opens_at_rest_and_its_morph_normals_follow_the_folds_in_thre
     assert_eq!(r["pc2"]["max_abs"], 0.0, "{r}");
     let r = pyalembic(&abc, Some((&body, "body")));
     assert_eq!(r["pc2"]["max_abs"], 0.0, "{r}");
+}
+
+/// The seam-split glb's vertex → garment vertex map of `model`'s garment, written as JSON.
+fn source_vertex_map(model: &Path, path: &Path) {
+    let file = garmentbake::models::file::load(model, tch::Device::Cpu).unwrap();
+    let skin = garmentbake::rig::Skin::from_dense(&vec![vec![1.0]; file.garment.vertex_count()], 1);
+    let mesh =
+        garmentbake::bake::skinned_mesh_asset("garment", &file.garment, None, &skin, [0.0; 3]);
+    std::fs::write(path, serde_json::to_string(&mesh.source_vertex).unwrap()).unwrap();
+}
+
+/// `rollout --out x.glb --max-targets K` (issue 40): the file has K blend shapes (the tolerance
+/// would keep more), rollout prints what they cost, and three.js plays every frame of the
+/// roll-out (its own PC2 from the same command) within that printed error, and finds that error
+/// (the print is the file's, not a bound taken from elsewhere); Khronos-clean.
+/// `--max-targets 0`: one `error:` line, exit 2, nothing written.
+#[test]
+fn the_rollout_gltf_keeps_max_targets_and_replays_within_the_error_it_prints() {
+    let (dir, sim, model) = rollout_model();
+    let frames = 12;
+    let n = frames.to_string();
+    let (pc2, glb, map) = (
+        dir.join("budget.pc2"),
+        dir.join("budget.glb"),
+        dir.join("budget_map.json"),
+    );
+    garmentbake_ok(&rollout_args(model, sim, &n, &pc2, &[]));
+    let free = garmentbake_json(&rollout_args(model, sim, &n, &glb, &["--json"]));
+    let rank = free["baked"]["rank"].as_u64().unwrap() as usize;
+    let at_1mm = free["baked"]["targets"].as_u64().unwrap() as usize;
+    let k = 2;
+    assert!(
+        at_1mm > k,
+        "the 1 mm tolerance keeps {at_1mm} of rank {rank}"
+    );
+    let printed = garmentbake_ok(&rollout_args(
+        model,
+        sim,
+        &n,
+        &glb,
+        &["--max-targets", &k.to_string()],
+    ));
+    let (ok, text) = khronos_validate(&glb);
+    assert!(ok, "{text}");
+    assert_eq!(every_target_has_normals(&glb), k, "{printed}");
+    let line = printed
+        .lines()
+        .find(|l| l.starts_with(&format!("--max-targets {k} costs ")))
+        .unwrap_or_else(|| panic!("no cost line in {printed}"));
+    let cost_mm: f64 = line
+        .trim_start_matches(&format!("--max-targets {k} costs "))
+        .split(' ')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    source_vertex_map(model, &map);
+    let times: Vec<f64> = (0..frames).map(|f| f as f64 / 30.0).collect();
+    let three_mm = 1e3 * threejs_cache_error(&glb, &times, &pc2, &map);
+    eprintln!(
+        "rollout --max-targets {k} ({frames} frames; rank {rank}, 1 mm keeps {at_1mm}): prints {cost_mm:.3} mm, three.js {three_mm:.4} mm"
+    );
+    // The print has 3 decimals; three.js and our replay differ by f32 noise (0.0001 mm).
+    assert!(cost_mm > 1.0, "{k} targets cost only {cost_mm} mm");
+    assert!(
+        (three_mm - cost_mm).abs() <= 0.0006,
+        "printed {cost_mm} mm, three.js {three_mm:.4} mm"
+    );
+    // --max-targets 0: refused before any work.
+    let zero = dir.join("zero.glb");
+    let o = garmentbake_in_root(&rollout_args(
+        model,
+        sim,
+        &n,
+        &zero,
+        &["--max-targets", "0"],
+    ));
+    let err = one_error_line(&o, &zero);
+    assert!(err.contains("--max-targets"), "{err}");
 }
 
 /// tools/abc/read.py (the Alembic library itself, PyAlembic from PyPI `alembic3d`) on `abc`,

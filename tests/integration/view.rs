@@ -162,6 +162,85 @@ fn page_matches_the_preview_silhouette_and_lists_every_clip() {
     }
 }
 
+/// Vertex animation textures in the page (issue 40): `eval --out walk.vat.exr --view walk.html`
+/// plays the VAT's own mesh and textures in a vertex shader on the posed body, and its garment
+/// silhouette matches `preview` of the network at the same frame (IoU ≥ 0.95, as the bake's page
+/// above); `view walk.vat.png` plays the 16-bit VAT alone, its garment where the first page's
+/// is with the body hidden (both frame the garment alone then).
+#[test]
+fn a_vat_plays_in_the_page_as_the_preview_shows_the_network() {
+    let dir = out_dir("view_vat");
+    let eval = |out: &Path, extra: &[&str]| {
+        let mut args = vec!["eval", "--model", model().to_str().unwrap()];
+        args.extend(["--motion", s("motions/131_02.bvh"), "--fps", "10"]);
+        args.extend(["--threads", "1", "--out", out.to_str().unwrap()]);
+        args.extend_from_slice(extra);
+        garmentbake_ok(&args);
+    };
+    let page = dir.join("walk.html");
+    eval(
+        &dir.join("walk.vat.exr"),
+        &["--view", page.to_str().unwrap()],
+    );
+    let png = dir.join("walk16.vat.png");
+    eval(&png, &[]);
+    let alone = dir.join("alone.html");
+    let report = garmentbake_json(&[
+        "view",
+        png.to_str().unwrap(),
+        "--out",
+        alone.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(report["garment_vertices"], 2847, "{report}");
+    for frame in [12, 61] {
+        let shot = screenshot(
+            &page,
+            &format!("clip=131_02&frame={frame}&view=front&ui=0"),
+            &dir.join(format!("page_{frame}.png")),
+        );
+        let preview = dir.join(format!("preview_{frame}.png"));
+        garmentbake_ok(&[
+            "preview",
+            "--body",
+            s("body.glb"),
+            "--model",
+            model().to_str().unwrap(),
+            "--motion",
+            s("motions/131_02.bvh"),
+            "--fps",
+            "10",
+            "--frame-list",
+            &frame.to_string(),
+            "--views",
+            "front",
+            "--width",
+            &W.to_string(),
+            "--height",
+            &H.to_string(),
+            "--out",
+            preview.to_str().unwrap(),
+        ]);
+        let preview = image::open(&preview).unwrap().to_rgb8();
+        let (a, b) = (garment_mask(&shot), garment_mask(&preview));
+        let score = iou(&a, &b);
+        eprintln!(
+            "VAT page, frame {frame}: IoU {score:.4} with the preview ({} page, {} preview garment pixels)",
+            a.iter().filter(|x| **x).count(),
+            b.iter().filter(|x| **x).count()
+        );
+        assert!(b.iter().filter(|x| **x).count() > 2000);
+        assert!(score >= 0.95, "frame {frame}: IoU {score:.4} < 0.95");
+        // The 16-bit VAT alone against the first page with its body hidden.
+        let hash = format!("frame={frame}&view=front&ui=0&body=0");
+        let bare = screenshot(&page, &hash, &dir.join(format!("bare_{frame}.png")));
+        let own = screenshot(&alone, &hash, &dir.join(format!("alone_{frame}.png")));
+        let score = iou(&garment_mask(&bare), &garment_mask(&own));
+        eprintln!("view walk16.vat.png, frame {frame}: IoU {score:.4} with the eval page's VAT");
+        assert!(score >= 0.95, "frame {frame}: IoU {score:.4} < 0.95");
+    }
+}
+
 /// The network's garment on the first frames of 131_02 at 10 fps, as the model's vertices
 /// (what `eval` writes), shifted by `dx` metres along x.
 fn network_cache(path: &Path, frames: usize, dx: f32) {

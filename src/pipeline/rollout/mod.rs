@@ -6,6 +6,7 @@
 pub mod report;
 
 use super::Feedback;
+use crate::bake::compress::Targets;
 use crate::bake::sequence::{bake_sequence, SequenceReport};
 use crate::compute::Compute;
 use crate::eval::lbs_frames;
@@ -43,7 +44,9 @@ pub struct Request {
     pub settings: Settings,
     /// Point cache or glTF (by extension).
     pub out: PathBuf,
-    /// glTF: the replay tolerance that picks the blend shapes (and the `validate` limit).
+    /// glTF: how many blend shapes to keep (a count, or the fewest within a replay tolerance).
+    pub targets: Targets,
+    /// The `validate` limit (mm).
     pub tolerance_mm: f32,
     /// glTF: 32-bit blend shapes instead of quantized ones.
     pub float_targets: bool,
@@ -186,6 +189,7 @@ pub fn run(request: &Request, outputs: OutputSet, feedback: &Feedback) -> Result
     let view = match &r.view {
         Some(page) => {
             let names: Vec<String> = clips.iter().map(|c| c.name.clone()).collect();
+            let vat = super::view::staged_vat(&outputs, &r.out)?;
             let bytes = outputs.write(page, |p| {
                 super::view::cache_page(
                     p,
@@ -193,6 +197,7 @@ pub fn run(request: &Request, outputs: OutputSet, feedback: &Feedback) -> Result
                     (&names.join(" + "), fps, &poses),
                     ("roll-out", &rollout.frames),
                     reference.map(|r| ("simulation", r.as_slice())),
+                    vat.as_ref(),
                 )
             })?;
             Some((page.clone(), bytes))
@@ -303,7 +308,7 @@ fn write_gltf(
         &skin,
         &animation,
         frames,
-        r.tolerance_mm * 1e-3,
+        r.targets,
         !r.float_targets,
     )?;
     asset.provenance = vec![

@@ -213,6 +213,15 @@ impl Display for Report {
             write!(f, "{all}")?;
         }
         if let Some(b) = &r.baked {
+            if let Some(k) = b.max_targets {
+                writeln!(
+                    f,
+                    "--max-targets {k} costs {:.3} mm: the glTF replays the roll-out within {:.3} mm at every frame (mean {:.4} mm)",
+                    b.max_error_m * 1e3,
+                    b.max_error_m * 1e3,
+                    b.mean_error_m * 1e3
+                )?;
+            }
             writeln!(
                 f,
                 "glTF: {} blend shapes (residual rank {}), {}, weights 0 to {:.3}, within {:.3} mm of the roll-out (mean {:.4} mm)",
