@@ -3,7 +3,7 @@
 //! default `weights`), and its morph NORMAL deltas shade the played frames within a few degrees
 //! of the normals three.js's own positions have; the Khronos validator finds nothing.
 
-use crate::bake::{model, s};
+use crate::bake::{model, s, FRAMES_AT_4};
 use crate::common::*;
 use std::path::Path;
 use std::process::Command;
@@ -324,15 +324,11 @@ fn pyalembic(abc: &Path, pc2: Option<(&Path, &str)>) -> serde_json::Value {
     serde_json::from_slice(&run_ok(&mut cmd).stdout).unwrap()
 }
 
-/// `eval` of the test model on 131_02 into `dir/NAME.pc2` and `dir/NAME.abc`: the same frames.
-fn eval_both(dir: &Path, name: &str) -> (std::path::PathBuf, std::path::PathBuf) {
-    let (pc2, abc) = (
-        dir.join(format!("{name}.pc2")),
-        dir.join(format!("{name}.abc")),
-    );
-    crate::bake::eval_131_02(&pc2);
-    crate::bake::eval_131_02(&abc);
-    (pc2, abc)
+/// `eval` of the test model on 131_02 at 4 fps to PC2 and to `.abc`: the same frames (the shared
+/// caches, [`crate::bake::shared_eval_131_02_at_4`]).
+fn eval_both() -> (std::path::PathBuf, std::path::PathBuf) {
+    let eval = crate::bake::shared_eval_131_02_at_4;
+    (eval("walk.pc2"), eval("walk.abc"))
 }
 
 /// `.abc` from `eval` (the same writer serves simulate, interpolate, rollout and batch, through
@@ -342,16 +338,15 @@ fn eval_both(dir: &Path, name: &str) -> (std::path::PathBuf, std::path::PathBuf)
 /// times at 1 / (2 fps) (time_per_sample) and with the frames written one behind (max_abs).
 #[test]
 fn eval_writes_an_alembic_cache_pyalembic_reads_as_the_pc2() {
-    let dir = out_dir("engine_abc");
-    let (pc2, abc) = eval_both(&dir, "eval");
-    let r = pyalembic(&abc, Some((&pc2, "eval")));
+    let (pc2, abc) = eval_both();
+    let r = pyalembic(&abc, Some((&pc2, "walk")));
     eprintln!("PyAlembic: {r}");
     let mesh = &r["meshes"][0];
     assert_eq!(r["meshes"].as_array().unwrap().len(), 1, "{r}");
-    assert_eq!(mesh["samples"], 312, "{r}");
-    assert_eq!(r["pc2"]["frames"], 312, "{r}");
+    assert_eq!(mesh["samples"], FRAMES_AT_4, "{r}");
+    assert_eq!(r["pc2"]["frames"], FRAMES_AT_4, "{r}");
     assert!(
-        (mesh["time_per_sample"].as_f64().unwrap() - 1.0 / 30.0).abs() < 1e-9,
+        (mesh["time_per_sample"].as_f64().unwrap() - 1.0 / 4.0).abs() < 1e-9,
         "{r}"
     );
     assert_eq!(mesh["start_time"], 0.0, "{r}");
@@ -362,7 +357,7 @@ fn eval_writes_an_alembic_cache_pyalembic_reads_as_the_pc2() {
     assert_eq!(mesh["user"]["upAxis"], "Y", "{r}");
     let size = |p: &Path| std::fs::metadata(p).unwrap().len();
     eprintln!(
-        "312 frames of 2,808 points: .abc {} bytes, .pc2 {} bytes",
+        "{FRAMES_AT_4} frames of 2,808 points: .abc {} bytes, .pc2 {} bytes",
         size(&abc),
         size(&pc2)
     );
@@ -384,19 +379,19 @@ fn slow_blender_imports_the_alembic_cache_as_the_pc2() {
         "Blender's bpy is not installed; run `bash scripts/setup_bpy.sh`"
     );
     let dir = out_dir("engine_abc_blender");
-    let (pc2, abc) = eval_both(&dir, "eval");
+    let (pc2, abc) = eval_both();
     let json = dir.join("blender.json");
     run_ok(
         Command::new(&python)
             .arg(root().join("tools/blender/eval_abc.py"))
             .arg(&abc)
-            .args(["--fps", "30", "--all", "--out"])
+            .args(["--fps", "4", "--all", "--out"])
             .arg(&json),
     );
     let r: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert_eq!(r["scene"]["frame_start"], 0, "{}", r["scene"]);
-    assert_eq!(r["scene"]["frame_end"], 311, "{}", r["scene"]);
+    assert_eq!(r["scene"]["frame_end"], FRAMES_AT_4 - 1, "{}", r["scene"]);
     let mesh = &r["meshes"][0];
     // Blender's faces, as it orders them, are ours up to a rotation (front side kept).
     let file = garmentbake::models::file::load(crate::bake::model(), tch::Device::Cpu).unwrap();
@@ -442,6 +437,8 @@ fn alembic_without_its_module_and_an_unknown_extension_are_one_error_line() {
         if let Some(v) = venv {
             cmd.env("GARMENTBAKE_VENV", v);
         }
+        // At 4 fps: the missing module is found when the cache is written, after the clip's
+        // metrics (312 frames at 30 fps are 80 s of CPU; 42 frames give the same error).
         cmd.args([
             "eval",
             "--model",
@@ -449,7 +446,9 @@ fn alembic_without_its_module_and_an_unknown_extension_are_one_error_line() {
             "--motion",
             s("motions/131_02.bvh"),
             "--fps",
-            "30",
+            "4",
+            "--threads",
+            "1",
             "--out",
         ])
         .arg(out)
@@ -474,14 +473,9 @@ fn alembic_without_its_module_and_an_unknown_extension_are_one_error_line() {
     );
 }
 
-/// `eval` of the test model on 131_02 in metres, Y-up, as a PC2: run once for the tests below.
-fn native_pc2() -> &'static std::path::PathBuf {
-    static PC2: std::sync::OnceLock<std::path::PathBuf> = std::sync::OnceLock::new();
-    PC2.get_or_init(|| {
-        let pc2 = out_dir("engine_native").join("walk.pc2");
-        crate::bake::eval_131_02(&pc2);
-        pc2
-    })
+/// `eval` of the test model on 131_02 at 4 fps in metres, Y-up, as a PC2: the shared cache.
+fn native_pc2() -> std::path::PathBuf {
+    crate::bake::shared_eval_131_02_at_4("walk.pc2")
 }
 
 /// tools/node/vat_read.mjs: the VAT of `sidecar` rebuilt by three.js (GLTFLoader, EXRLoader) and
@@ -500,21 +494,22 @@ fn vat_read(sidecar: &Path, pc2: &Path) -> serde_json::Value {
 /// interpolate and batch): four files each (positions, normals, JSON, glb), the glb
 /// Khronos-clean; rebuilt by readers we did not write (three.js' GLTFLoader for the rest
 /// positions and TEXCOORD_1, its EXRLoader, pngjs for 16-bit PNG) every frame of every vertex
-/// lies within the encoding's bound of the same command's PC2: float32 EXR measured 0.0003 mm,
-/// 16-bit PNG 0.0195 mm against its half-step bound of 0.0194 mm (+ f32 rounding) over the
-/// walk's 2.4 m bounds. The normals texture, read by the `image` crate, holds each frame's
+/// lies within the encoding's bound of the same command's PC2 (131_02 at 4 fps, 42 frames: the
+/// bounds are per texel, every frame of the walk a sample of them): float32 EXR measured
+/// 0.0003 mm, 16-bit PNG 0.0189 mm against its half-step bound of 0.0190 mm (+ f32 rounding)
+/// over the walk's 2.4 m bounds (at 30 fps, 312 frames: 0.0003 mm and 0.0195 mm of 0.0194 mm). The normals texture, read by the `image` crate, holds each frame's
 /// normals of the PC2's positions. Checked to fail with TEXCOORD_1 one column off and with the
 /// rows written bottom-up (docs/caches.md says how it failed).
 #[test]
 fn eval_writes_vertex_animation_textures_threejs_and_pngjs_rebuild_as_the_pc2() {
-    let pc2 = native_pc2();
+    let pc2 = &native_pc2();
     let (_, frames) = exporters::pc2::read(&std::fs::read(pc2).unwrap()).unwrap();
     let model = garmentbake::models::file::load(crate::bake::model(), tch::Device::Cpu).unwrap();
     let triangles = &model.garment.triangles;
     for ext in ["exr", "png"] {
         let dir = out_dir(&format!("engine_vat_{ext}"));
         let out = dir.join(format!("walk.vat.{ext}"));
-        crate::bake::eval_131_02(&out);
+        crate::bake::eval_131_02_at_4(&out, &[]);
         let names = ["walk.vat.json", "walk.vat.glb"];
         let normals_file = dir.join(format!("walk.vat.normals.{ext}"));
         assert!(normals_file.exists() && names.iter().all(|n| dir.join(n).exists()));
@@ -525,9 +520,9 @@ fn eval_writes_vertex_animation_textures_threejs_and_pngjs_rebuild_as_the_pc2() 
             serde_json::from_str(&std::fs::read_to_string(&sidecar).unwrap()).unwrap();
         assert_eq!(
             (side.width, side.height, side.frame_count),
-            (2808, 312, 312)
+            (2808, FRAMES_AT_4, FRAMES_AT_4)
         );
-        assert_eq!(side.fps, 30.0);
+        assert_eq!(side.fps, 4.0);
         let r = vat_read(&sidecar, pc2);
         eprintln!(".vat.{ext}: {r}");
         let max = r["max_error"].as_f64().unwrap();
@@ -540,11 +535,11 @@ fn eval_writes_vertex_animation_textures_threejs_and_pngjs_rebuild_as_the_pc2() 
             std::fs::metadata(&out).unwrap().len(),
             std::fs::metadata(pc2).unwrap().len()
         );
-        assert_eq!(r["frames"], 312, "{r}");
+        assert_eq!(r["frames"], FRAMES_AT_4, "{r}");
         let bound = match ext {
             // float32 of offsets normalised to [0, 1]: measured 0.0003 mm.
             "exr" => 3e-6,
-            // Half a 16-bit step per axis (0.0194 mm here), and f32 rounding of the metres.
+            // Half a 16-bit step per axis (0.0190 mm here), and f32 rounding of the metres.
             _ => {
                 let half: f64 = (0..3)
                     .map(|a| {
@@ -567,9 +562,10 @@ fn eval_writes_vertex_animation_textures_threejs_and_pngjs_rebuild_as_the_pc2() 
         );
         // Normals: the texture's (image crate's decoder) against the PC2 frames' own normals.
         let img = image::open(&normals_file).unwrap().into_rgb32f();
-        assert_eq!(img.dimensions(), (2808, 312));
+        assert_eq!(img.dimensions(), (2808, FRAMES_AT_4 as u32));
         let mut worst = 0.0f64;
-        for (f, frame) in frames.iter().enumerate().step_by(31) {
+        // Every 4th frame: 11 frames spread over the walk.
+        for (f, frame) in frames.iter().enumerate().step_by(4) {
             let want = garmentbake::geometry::vertex_normals(frame, triangles);
             for (v, n) in want.iter().enumerate() {
                 // atan2(|t × n|, t · n) in f64: acos of an f32 dot near 1 is noise of ~0.3°.
@@ -600,7 +596,7 @@ fn eval_writes_vertex_animation_textures_threejs_and_pngjs_rebuild_as_the_pc2() 
 /// in the Alembic archive's user properties (Alembic has no field for them; PC2 and MDD neither).
 #[test]
 fn caches_in_centimetres_z_up_are_the_metre_y_up_cache_turned() {
-    let native = native_pc2();
+    let native = &native_pc2();
     let dir = out_dir("engine_units");
     let (pc2, usd, abc) = (
         dir.join("walk_cmz.pc2"),
@@ -608,23 +604,8 @@ fn caches_in_centimetres_z_up_are_the_metre_y_up_cache_turned() {
         dir.join("body_cmz.abc"),
     );
     let eval = |out: &Path, extra: &[&str]| {
-        let mut args = vec![
-            "eval",
-            "--model",
-            crate::bake::model().to_str().unwrap(),
-            "--motion",
-            s("motions/131_02.bvh"),
-            "--fps",
-            "30",
-            "--out-units",
-            "cm",
-            "--out-up",
-            "z",
-            "--out",
-            out.to_str().unwrap(),
-        ];
-        args.extend_from_slice(extra);
-        garmentbake_ok(&args);
+        let space = ["--out-units", "cm", "--out-up", "z"];
+        crate::bake::eval_131_02_at_4(out, &[&space, extra].concat());
     };
     eval(&pc2, &["--body-out", abc.to_str().unwrap()]);
     eval(&usd, &[]);
@@ -674,18 +655,8 @@ fn caches_in_centimetres_z_up_are_the_metre_y_up_cache_turned() {
 #[test]
 fn blender_reads_the_mdd_in_our_axes_and_handedness() {
     let dir = out_dir("engine_mdd");
-    let mdd = dir.join("walk.mdd");
-    garmentbake_ok(&[
-        "eval",
-        "--model",
-        crate::bake::model().to_str().unwrap(),
-        "--motion",
-        s("motions/131_02.bvh"),
-        "--fps",
-        "4",
-        "--out",
-        mdd.to_str().unwrap(),
-    ]);
+    // 131_02 at 4 fps (42 frames), the cache validate:: reads too.
+    let mdd = crate::bake::shared_eval_131_02_at_4("walk.mdd");
     let json = dir.join("blender.json");
     run_ok(
         Command::new("blender")

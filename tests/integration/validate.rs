@@ -934,27 +934,10 @@ const FRAMES: usize = 42;
 #[test]
 fn point_caches() {
     let dir = out_dir("validate_caches");
-    let (pc2, mdd, usdc) = (
-        dir.join("eval.pc2"),
-        dir.join("eval.mdd"),
-        dir.join("eval.usdc"),
-    );
     // 131_02 at 4 fps (42 frames): eval's metrics are the slow part, the checks need few frames.
-    for out in [&pc2, &mdd, &usdc] {
-        garmentbake_ok(&[
-            "eval",
-            "--model",
-            crate::bake::model().to_str().unwrap(),
-            "--motion",
-            crate::bake::s("motions/131_02.bvh"),
-            "--fps",
-            "4",
-            "--threads",
-            "1",
-            "--out",
-            out.to_str().unwrap(),
-        ]);
-    }
+    // The caches are the ones the cache tests share (engine::, bake::): read, never written.
+    let [pc2, mdd, usdc] =
+        ["walk.pc2", "walk.mdd", "walk.usdc"].map(crate::bake::shared_eval_131_02_at_4);
     // eval's caches pass and replay the network (the USD one read back by usd-core): measured
     // 0.0003 mm for all three against the network's forward pass, an evaluation independent of
     // eval's sparse skinning (a fault there used to be on both sides: 0 mm whatever it was).
