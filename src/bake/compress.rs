@@ -67,27 +67,39 @@ pub struct Spectrum {
 }
 
 pub fn spectrum(used: &UsedOffsets) -> Spectrum {
+    use tch::{Kind, Tensor};
     let k = used.basis.len();
     let n3 = used.basis.first().map_or(0, |b| b.len() * 3);
-    let dt = DMatrix::from_fn(n3, k, |r, c| used.basis[c][r / 3][r % 3] as f64);
-    let qr = dt.qr();
-    let (q, r) = (qr.q(), qr.r());
-    let x = DMatrix::from_fn(used.coefficients.len(), k, |f, c| {
-        used.coefficients[f][c] as f64
-    });
-    let svd = (x * r.transpose()).svd(true, true);
-    let (u, v_t) = (svd.u.expect("U requested"), svd.v_t.expect("V requested"));
-    // Sort by singular value (nalgebra does not promise an order).
-    let mut order: Vec<usize> = (0..svd.singular_values.len()).collect();
-    order.sort_by(|&a, &b| svd.singular_values[b].total_cmp(&svd.singular_values[a]));
-    let sv: Vec<f64> = order.iter().map(|&i| svd.singular_values[i]).collect();
-    let unordered = q * v_t.transpose();
-    let directions = DMatrix::from_fn(n3, order.len(), |row, c| unordered[(row, order[c])]);
-    let coefficients = DMatrix::from_fn(u.nrows(), order.len(), |f, c| u[(f, order[c])] * sv[c]);
+    let frames = used.coefficients.len();
+    if k == 0 || n3 == 0 || frames == 0 {
+        return Spectrum {
+            directions: DMatrix::zeros(n3, 0),
+            coefficients: DMatrix::zeros(frames, 0),
+            singular_values: Vec::new(),
+        };
+    }
+    // libtorch's LAPACK QR and SVD in f64 (nalgebra's unblocked QR of the tall D took seconds
+    // on a 256-wide basis: the bake's hot spot, `bench bake`).
+    let d: Vec<f32> = used.basis.iter().flatten().flatten().copied().collect();
+    let d = Tensor::from_slice(&d)
+        .view([k as i64, n3 as i64])
+        .to_kind(Kind::Double);
+    let (q, r) = Tensor::linalg_qr(&d.tr(), "reduced");
+    let x: Vec<f32> = used.coefficients.iter().flatten().copied().collect();
+    let x = Tensor::from_slice(&x)
+        .view([frames as i64, k as i64])
+        .to_kind(Kind::Double);
+    // O = X D = (X Rᵀ) Qᵀ = U Σ Vᵀ Qᵀ: directions Q V, coefficients U Σ (singular values
+    // come sorted, largest first).
+    let (u, sv, v) = x.matmul(&r.tr()).svd(true, true);
+    let directions = q.matmul(&v);
+    let coefficients = u * sv.unsqueeze(0);
+    let to_vec = |t: &Tensor| Vec::<f64>::try_from(&t.contiguous().view([-1])).expect("f64");
+    let m = sv.size()[0] as usize;
     Spectrum {
-        directions,
-        coefficients,
-        singular_values: sv,
+        directions: DMatrix::from_row_slice(n3, m, &to_vec(&directions)),
+        coefficients: DMatrix::from_row_slice(frames, m, &to_vec(&coefficients)),
+        singular_values: to_vec(&sv),
     }
 }
 
@@ -277,10 +289,27 @@ pub fn weights_from_zero(targets: &[Vec<[f32; 3]>], weights: &mut [Vec<f32>]) ->
 /// column per frame (one matrix product instead of a loop per frame and vertex: the bake's hot
 /// spot).
 pub fn offset_matrix(shapes: &[Vec<[f32; 3]>], coefficients: &[Vec<f32>]) -> DMatrix<f32> {
+    use tch::Tensor;
+    let (k, frames) = (shapes.len(), coefficients.len());
     let n3 = shapes.first().map_or(0, |s| s.len() * 3);
-    let s = DMatrix::from_fn(n3, shapes.len(), |r, k| shapes[k][r / 3][r % 3]);
-    let c = DMatrix::from_fn(shapes.len(), coefficients.len(), |k, f| coefficients[f][k]);
-    s * c
+    if k == 0 || n3 == 0 || frames == 0 {
+        return DMatrix::zeros(n3, frames);
+    }
+    // libtorch's BLAS (`bench bake`: nalgebra's product of the skirt's 256 shapes over 1,247
+    // frames was most of the compression phase). Row-major frames × 3N is the column-major
+    // 3N × frames nalgebra keeps.
+    let s: Vec<f32> = shapes.iter().flatten().flatten().copied().collect();
+    let c: Vec<f32> = coefficients
+        .iter()
+        .flat_map(|w| {
+            assert_eq!(w.len(), k, "one coefficient per shape");
+            w.iter().copied()
+        })
+        .collect();
+    let s = Tensor::from_slice(&s).view([k as i64, n3 as i64]);
+    let c = Tensor::from_slice(&c).view([frames as i64, k as i64]);
+    let o = c.matmul(&s).contiguous().view([-1]);
+    DMatrix::from_vec(n3, frames, Vec::<f32>::try_from(&o).expect("f32 offsets"))
 }
 
 /// Max and mean per-vertex distance between the network's offsets and the compressed ones.

@@ -35,6 +35,11 @@ pub struct BakeReport {
     pub used_rank: usize,
     pub influences: usize,
     pub clips: Vec<ClipError>,
+    /// Wall seconds per phase of the bake: `network` (the MLP's coefficients and its forward
+    /// pass for the replay check), `svd` (the offsets' compression), `normals` (the morph
+    /// normals' fit), `replay` (the file's replay against the network), `asset` (the rest).
+    #[serde(default)]
+    pub phases: Vec<(String, f64)>,
 }
 
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
@@ -85,11 +90,13 @@ pub fn bake(
     device: Device,
 ) -> Result<(BakedAsset, BakeReport)> {
     let network = model.pbns()?;
+    let mut clock = Phases::start();
     let basis = basis(network);
     let per_clip: Vec<Vec<Vec<f32>>> = clips
         .iter()
         .map(|c| clip_coefficients(network, model.skeleton(), c, device))
         .collect();
+    clock.lap("network");
     let all: Vec<Vec<f32>> = per_clip.iter().flatten().cloned().collect();
     let used = UsedOffsets {
         basis: &basis,
@@ -130,6 +137,7 @@ pub fn bake(
     unit_targets(&mut targets, &mut weights, false);
     let FromZero { base, rest_weights } = weights_from_zero(&targets, &mut weights);
     let base = moved_by(&model.garment, &base);
+    clock.lap("svd");
     // Global frame (clips in order) → its clip and frame, for the skinning the normals fit sees.
     let frames: Vec<(usize, usize)> = clips
         .iter()
@@ -152,6 +160,7 @@ pub fn bake(
         &rest_weights,
         &blended,
     );
+    clock.lap("normals");
     let mut garment =
         skinned_mesh_asset("garment", &base, Some(&normals.base), &skin, GARMENT_COLOR);
     let pick = |t: &[[f32; 3]]| -> Vec<[f32; 3]> {
@@ -192,7 +201,9 @@ pub fn bake(
         used_rank,
         influences: skin.influences,
         clips: Vec::new(),
+        phases: Vec::new(),
     };
+    clock.lap("asset");
     let mut start = 0;
     for (clip, x) in clips.iter().zip(&per_clip) {
         let w = &weights[start..start + x.len()];
@@ -202,7 +213,9 @@ pub fn bake(
         asset.animations.push(anim);
         // The network's own forward pass, not the basis and skin the bake was made from: a
         // fault in reading those out of the network would be on both sides of the comparison.
+        clock.lap("asset");
         let network = clip_forward(network, model.skeleton(), clip, device);
+        clock.lap("network");
         let baked = Replay::new(&targets, w, &skin);
         let pruning = pruned.then(|| {
             let uncorrected = Replay::new(&basis, x, &skin);
@@ -218,11 +231,39 @@ pub fn bake(
         let mut error = replay_error(model.skeleton(), &base.positions, clip, &network, &baked);
         error.pruning_error_m = pruning;
         report.clips.push(error);
+        clock.lap("replay");
     }
+    report.phases = clock.phases;
     asset
         .provenance
         .push(("generator".into(), "garmentbake bake (PBNS)".into()));
     Ok((asset, report))
+}
+
+/// Wall time per named phase, summed over the laps that name it, in order of first use.
+struct Phases {
+    last: std::time::Instant,
+    phases: Vec<(String, f64)>,
+}
+
+impl Phases {
+    fn start() -> Phases {
+        Phases {
+            last: std::time::Instant::now(),
+            phases: Vec::new(),
+        }
+    }
+
+    /// Counts the time since the last lap to `name`.
+    fn lap(&mut self, name: &str) {
+        let now = std::time::Instant::now();
+        let s = (now - self.last).as_secs_f64();
+        self.last = now;
+        match self.phases.iter_mut().find(|p| p.0 == name) {
+            Some(p) => p.1 += s,
+            None => self.phases.push((name.to_string(), s)),
+        }
+    }
 }
 
 /// The skin written to the file: the model's own, or pruned to fewer influences.

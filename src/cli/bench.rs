@@ -4,6 +4,7 @@
 
 use super::args::{CollisionFixArgs, ComputeArgs, FabricArgs, OutputArgs, TrainInputs};
 use super::Execute;
+use crate::bake::compress::Targets;
 use crate::garment::Garment;
 use crate::io::gltf_body::read_body;
 use crate::motion::{load_clip, read_maps};
@@ -32,6 +33,27 @@ enum What {
     Train(TrainBench),
     /// Time a roll-out and the simulation of the same frames.
     Rollout(RolloutBench),
+    /// Time a PBNS bake by phase beside Blender's glTF export of the same asset.
+    Bake(BakeBench),
+}
+
+#[derive(clap::Args)]
+struct BakeBench {
+    /// Trained PBNS model (.safetensors).
+    #[arg(long)]
+    model: PathBuf,
+    #[command(flatten)]
+    clips: super::args::ClipArgs,
+    /// Blend shapes to keep (as `bake --max-targets`).
+    #[arg(long, default_value_t = 64)]
+    max_targets: usize,
+    /// Skip Blender's export.
+    #[arg(long)]
+    no_blender: bool,
+    #[command(flatten)]
+    compute: ComputeArgs,
+    #[command(flatten)]
+    output: OutputArgs,
 }
 
 #[derive(clap::Args)]
@@ -88,6 +110,7 @@ pub enum Report {
         threads: usize,
     },
     Rollout(RolloutTimes),
+    Bake(crate::pipeline::bench_bake::Report),
 }
 
 /// Roll-out and simulation of the same frames, per clip frame.
@@ -118,6 +141,7 @@ impl Args {
         match &self.what {
             What::Train(b) => b.output.json,
             What::Rollout(b) => b.output.json,
+            What::Bake(b) => b.output.json,
         }
     }
 }
@@ -206,6 +230,18 @@ impl Execute for Args {
         let b = match &self.what {
             What::Train(b) => b,
             What::Rollout(r) => return Ok(Report::Rollout(r.run(say)?)),
+            What::Bake(b) => {
+                let request = crate::pipeline::bench_bake::Request {
+                    model: b.model.clone(),
+                    clips: b.clips.clips(),
+                    targets: Targets::from_flags(Some(b.max_targets), None, Targets::Full)?,
+                    blender: !b.no_blender,
+                    device: b.compute.apply()?,
+                };
+                return Ok(Report::Bake(crate::pipeline::bench_bake::run(
+                    &request, say,
+                )?));
+            }
         };
         let (inputs, settings, _) = b.inputs.load(1, false)?;
         let mut trainer = Trainer::new(inputs, settings)?;
@@ -219,6 +255,7 @@ impl Execute for Args {
         let (b, threads) = match r {
             Report::Train { bench, threads } => (bench, *threads),
             Report::Rollout(t) => return print_rollout(t),
+            Report::Bake(b) => return print!("{b}"),
         };
         println!(
             "{} steps of {} poses, {} garment vertices, {} training poses, {} threads",

@@ -7,7 +7,9 @@
 //! - `rollout`: a dynamic model played over clips, written and measured against simulations
 //! - `compare`: caches of one clip against perturbed simulations of it
 //! - `train_dynamic`: the dynamic model's two stages trained on simulated clips
+//! - `bench_bake`: the PBNS bake timed by phase beside Blender's glTF export of the same asset
 
+pub mod bench_bake;
 pub mod compare;
 pub mod preview;
 pub mod rollout;
