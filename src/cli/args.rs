@@ -292,6 +292,11 @@ pub struct TrainInputs {
     /// Pose balancing threshold (radians, per rotation component of the garment's joints).
     #[arg(long, default_value_t = TRAIN_DEFAULTS.pose_threshold, value_parser = non_negative::<f32>(), help_heading = "Training")]
     pub pose_threshold: f32,
+    /// At most this many balanced clip poses (train + validation). Many clips balance to
+    /// thousands; beyond the budget the poses are thinned farthest first (each kept pose the one
+    /// farthest from those already kept), which keeps rare poses and drops repeats of common ones.
+    #[arg(long, default_value_t = TRAIN_DEFAULTS.pose_budget, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(2..), help_heading = "Training")]
+    pub pose_budget: usize,
     /// Extra training poses per balanced one, each taking every limb chain (legs, spine, neck and
     /// head, arms) from a different real frame: covers pose combinations the clips lack.
     #[arg(long, default_value_t = TRAIN_DEFAULTS.recombine, help_heading = "Training")]
@@ -369,6 +374,7 @@ impl TrainInputs {
             train_weights: !self.fixed_weights,
             seed: self.seed,
             pose_threshold: self.pose_threshold,
+            pose_budget: self.pose_budget,
             recombine: self.recombine,
             coverage: self.coverage,
             refresh_every: self.refresh_every,

@@ -182,8 +182,13 @@ fn say_poses(trainer: &Trainer, say: &dyn Fn(&str)) {
         .map(|&j| trainer.file.body.skeleton.joint_names[j].as_str())
         .collect();
     let real = count(&p.train, PoseKind::Clip);
+    let thinned = if p.balanced > real + p.validation.len() {
+        format!(" (thinned from {} by --pose-budget)", p.balanced)
+    } else {
+        String::new()
+    };
     say(&format!(
-        "poses: {} balanced of {} frames ({real} train + {} recombined + {} range-sampled, {} validation; threshold {} rad on {})",
+        "poses: {} balanced{thinned} of {} frames ({real} train + {} recombined + {} range-sampled, {} validation; threshold {} rad on {})",
         real + p.validation.len(),
         p.frames_seen,
         count(&p.train, PoseKind::Recombined),

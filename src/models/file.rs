@@ -348,6 +348,10 @@ pub struct TrainingInfo {
     pub motions: Vec<String>,
     /// The balancing threshold (radians; see [`crate::models::coverage`]).
     pub pose_threshold: f32,
+    /// The pose budget, recorded only when it thinned the balanced poses (files of fewer clips
+    /// keep their bytes).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pose_budget: Option<usize>,
     /// Frames at least this far from every training pose are beyond the trained range: the
     /// 95th percentile of the training clips' held-out distances (`train::poses::
     /// held_out_threshold`). Older files lack it and use `pose_threshold`.

@@ -46,6 +46,9 @@ pub struct Settings {
     pub train_weights: bool,
     pub seed: u64,
     pub pose_threshold: f32,
+    /// At most this many balanced clip poses (train + validation), thinned farthest first
+    /// ([`poses::thinned`]) when many clips balance to more.
+    pub pose_budget: usize,
     /// A joint is compared for pose balancing if its subtree carries this share of the skin.
     pub joint_share: f32,
     pub validation: f32,
@@ -102,6 +105,7 @@ impl Settings {
         train_weights: true,
         seed: 0,
         pose_threshold: 0.15,
+        pose_budget: 600,
         joint_share: 0.01,
         validation: 0.15,
         recombine: 0,
@@ -424,6 +428,7 @@ impl Trainer {
             &clips,
             joints,
             settings.pose_threshold,
+            settings.pose_budget,
             settings.validation,
             settings.seed,
         );
@@ -1224,6 +1229,8 @@ fn describe(
                 train_weights: settings.train_weights,
                 motions: motion_names,
                 pose_threshold: settings.pose_threshold,
+                pose_budget: (poses.balanced > settings.pose_budget)
+                    .then_some(settings.pose_budget),
                 coverage_threshold,
                 poses_train: poses.train.len(),
                 poses_validation: poses.validation.len(),

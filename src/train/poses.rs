@@ -58,6 +58,9 @@ pub struct PoseSet {
     pub validation: Vec<Pose>,
     /// Frames looked at.
     pub frames_seen: usize,
+    /// Poses the balancing kept before the budget thinned them (`train` + `validation` when the
+    /// budget was not reached).
+    pub balanced: usize,
     /// The joints compared.
     pub joints: Vec<usize>,
 }
@@ -101,15 +104,66 @@ pub fn balanced(clips: &[SkelAnimation], joints: &[usize], threshold: f32) -> Ve
     out
 }
 
-/// Balanced set split into train and validation (`validation` fraction, shuffled by `seed`).
+/// At most `budget` of the `picked` frames, chosen farthest first: the first frame, then again and
+/// again the frame farthest from every one chosen (in [`pose_distance`]). Fifty takes balance to
+/// thousands of poses, more than a training run of minutes can visit; thinning them this way
+/// keeps the rare poses (a leg raised above the hip) that a random subset would mostly lose, and
+/// spends fewer poses on the walk every take repeats. Order of the kept frames is preserved.
+pub fn thinned(
+    clips: &[SkelAnimation],
+    joints: &[usize],
+    picked: Vec<(usize, usize)>,
+    budget: usize,
+) -> Vec<(usize, usize)> {
+    if picked.len() <= budget {
+        return picked;
+    }
+    let keys: Vec<PoseKey> = picked
+        .iter()
+        .map(|&(c, f)| pose_key(&clips[c].rotations[f], joints))
+        .collect();
+    let mut nearest = vec![f32::INFINITY; keys.len()];
+    let mut chosen = vec![false; keys.len()];
+    let mut next = 0;
+    for _ in 0..budget {
+        chosen[next] = true;
+        let from = &keys[next];
+        nearest
+            .par_iter_mut()
+            .zip(&keys)
+            .for_each(|(d, k)| *d = d.min(pose_distance(from, k)));
+        // Ties go to the earliest frame, so the choice does not depend on thread timing.
+        next = (0..keys.len())
+            .filter(|&i| !chosen[i])
+            .fold(None, |best: Option<usize>, i| match best {
+                Some(b) if nearest[b] >= nearest[i] => Some(b),
+                _ => Some(i),
+            })
+            .unwrap_or(0);
+    }
+    picked
+        .into_iter()
+        .zip(chosen)
+        .filter_map(|(p, keep)| keep.then_some(p))
+        .collect()
+}
+
+/// Balanced set (thinned to at most `budget` poses) split into train and validation
+/// (`validation` fraction, shuffled by `seed`).
 pub fn pose_set(
     clips: &[SkelAnimation],
     joints: Vec<usize>,
     threshold: f32,
+    budget: usize,
     validation: f32,
     seed: u64,
 ) -> PoseSet {
-    let mut picked = balanced(clips, &joints, threshold);
+    let balanced_count;
+    let mut picked = {
+        let all = balanced(clips, &joints, threshold);
+        balanced_count = all.len();
+        thinned(clips, &joints, all, budget)
+    };
     shuffle(&mut picked, seed);
     let n_val = ((picked.len() as f32 * validation).round() as usize).min(picked.len());
     let pose = |&(c, f): &(usize, usize)| Pose {
@@ -123,6 +177,7 @@ pub fn pose_set(
         train: train.iter().map(pose).collect(),
         validation: val.iter().map(pose).collect(),
         frames_seen: clips.iter().map(SkelAnimation::frame_count).sum(),
+        balanced: balanced_count,
         joints,
     }
 }

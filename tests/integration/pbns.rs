@@ -804,7 +804,7 @@ fn balanced_poses_differ_by_the_threshold_and_recombined_ones_mix_real_limbs() {
         }
     }
 
-    let set = pose_set(&clips, joints, 0.3, 0.15, 7);
+    let set = pose_set(&clips, joints, 0.3, usize::MAX, 0.15, 7);
     let mixed = recombined(&set.train, sk, 50, 0.0, 7);
     assert_eq!(mixed.len(), 50);
     assert_eq!(mixed, recombined(&set.train, sk, 50, 0.0, 7), "seeded");
@@ -869,6 +869,51 @@ fn balanced_poses_differ_by_the_threshold_and_recombined_ones_mix_real_limbs() {
         }
     }
     assert!(stretched > 20, "{stretched} chains amplified");
+}
+
+#[test]
+fn a_pose_budget_keeps_the_poses_farthest_apart() {
+    use garmentbake::models::coverage::{pose_distance, pose_key};
+    use garmentbake::train::poses::{balanced, pose_set, thinned};
+    let b = body();
+    let j = |n: &str| b.skeleton.joint_names.iter().position(|x| x == n).unwrap();
+    let clips = vec![clip("131_01.bvh"), clip("01_01.bvh")];
+    let joints: Vec<usize> = [
+        "LeftUpLeg",
+        "RightUpLeg",
+        "LeftLeg",
+        "RightLeg",
+        "LowerBack",
+    ]
+    .iter()
+    .map(|n| j(n))
+    .collect();
+    let all = balanced(&clips, &joints, 0.15);
+    let budget = all.len() / 4;
+    let kept = thinned(&clips, &joints, all.clone(), budget);
+    assert_eq!(kept.len(), budget);
+    assert!(kept.windows(2).all(|w| w[0] < w[1]), "clip order kept");
+    assert_eq!(thinned(&clips, &joints, all.clone(), all.len()), all);
+    // The largest distance from a balanced pose to its nearest kept one (the cover radius):
+    // farthest-first thinning covers the balanced set much better than its first poses do.
+    let key = |&(c, f): &(usize, usize)| pose_key(&clips[c].rotations[f], &joints);
+    let radius = |sub: &[(usize, usize)]| {
+        let keys: Vec<_> = sub.iter().map(key).collect();
+        all.iter()
+            .map(|p| {
+                let k = key(p);
+                keys.iter()
+                    .map(|q| pose_distance(&k, q))
+                    .fold(f32::INFINITY, f32::min)
+            })
+            .fold(0.0f32, f32::max)
+    };
+    let (r_thin, r_first) = (radius(&kept), radius(&all[..budget]));
+    println!("{} balanced, budget {budget}: cover radius {r_thin:.3} rad thinned, {r_first:.3} first poses", all.len());
+    assert!(r_thin < 0.6 * r_first, "{r_thin} vs {r_first}");
+    let set = pose_set(&clips, joints, 0.15, budget, 0.15, 0);
+    assert_eq!(set.train.len() + set.validation.len(), budget);
+    assert_eq!(set.balanced, all.len());
 }
 
 #[test]
@@ -1152,7 +1197,7 @@ fn range_sampled_poses_turn_garment_joints_across_their_widened_ranges() {
         j("RightLeg"),
         j("Spine"),
     ];
-    let set = pose_set(&clips, joints.clone(), 0.15, 0.15, 0);
+    let set = pose_set(&clips, joints.clone(), 0.15, usize::MAX, 0.15, 0);
     let seen = JointRanges::of(&clips, sk.joint_count());
     let wide = seen.widened(RANGE_WIDEN);
     let sampled = range_sampled(&set.train, &wide, &joints, 200, 5);
@@ -1371,7 +1416,7 @@ fn the_coverage_threshold_holds_the_training_frames_and_not_a_pose_beyond_them()
     ];
     let joints: Vec<usize> = names.iter().map(|n| j(n)).collect();
     let clips = [clip("01_01.bvh"), clip("131_01.bvh")];
-    let set = pose_set(&clips, joints.clone(), 0.15, 0.15, 0);
+    let set = pose_set(&clips, joints.clone(), 0.15, usize::MAX, 0.15, 0);
     let threshold = held_out_threshold(
         &clips,
         &set.train,
