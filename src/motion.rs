@@ -95,6 +95,13 @@ pub fn load_clip(
 ) -> Result<Retargeted> {
     let bvh = Bvh::read(path)?;
     let (mut clip, _) = retarget_bvh(path, &bvh, reader, skeleton)?;
+    // Every command that reads a clip says how: a wrong up axis or unit is found here, not in
+    // a garment through the floor.
+    crate::progress::note(&format!(
+        "reading: {}: {}",
+        path.file_name().unwrap_or_default().to_string_lossy(),
+        clip.reading.describe(&clip.map_name)
+    ));
     if let Some(fps) = fps {
         let step = clip.animation.fps / fps;
         if fps <= 0.0 || (step - step.round()).abs() > 1e-3 || step < 1.0 {

@@ -14,6 +14,14 @@ pub fn set_quiet(quiet: bool) {
     QUIET.store(quiet, Ordering::Relaxed);
 }
 
+/// A line for the log on stderr (how an input was read, a choice made for the user), unless
+/// `--quiet`: what the report on stdout does not repeat but a technical artist checks first.
+pub fn note(line: &str) {
+    if !QUIET.load(Ordering::Relaxed) {
+        eprintln!("{line}");
+    }
+}
+
 /// Plain lines: the first no sooner than this after the start (short work stays silent) ...
 const FIRST_AFTER: Duration = Duration::from_secs(1);
 /// ... unless this variable says otherwise (seconds; 0 logs from the first tenth, e.g. for a farm

@@ -248,7 +248,9 @@ pub fn one_error_line(output: &Output, out: &Path) -> String {
     assert_eq!(output.status.code(), Some(2), "{err}");
     let lines: Vec<&str> = err
         .lines()
-        .filter(|l| !l.trim().is_empty() && !l.starts_with("progress: "))
+        .filter(|l| {
+            !l.trim().is_empty() && !l.starts_with("progress: ") && !l.starts_with("reading: ")
+        })
         .collect();
     assert_eq!(lines.len(), 1, "{err}");
     assert!(lines[0].starts_with("error: "), "{err}");
