@@ -90,6 +90,14 @@ pub fn bake(
     device: Device,
 ) -> Result<(BakedAsset, BakeReport)> {
     let network = model.pbns()?;
+    if network
+        .swing
+        .as_ref()
+        .is_some_and(|s| !s.shape.bones.is_empty())
+    {
+        // The bones need extra joints with rotation tracks in the file's skin: not written yet.
+        anyhow::bail!("this swing turns swing bones, which `bake` cannot write yet: eval it to a point cache (--out NAME.pc2/.abc/.usd) instead");
+    }
     let mut clock = Phases::start();
     let basis = basis(network);
     let per_clip: Vec<Vec<Vec<f32>>> = clips

@@ -54,6 +54,11 @@ pub struct Args {
     /// Swing blend shapes (added to the PSD ones in a bake).
     #[arg(long, default_value_t = Settings::recipe().shapes, help_heading = "Training")]
     pub shapes: usize,
+    /// Swing bones: the garment's copies of the N joints carrying most of its skin turn by a
+    /// learnt rotation about each joint (a turn moves cloth without stretching it). `bake` cannot
+    /// write them yet; eval to a point cache.
+    #[arg(long, default_value_t = Settings::recipe().bones, help_heading = "Training")]
+    pub bones: usize,
     /// Hidden width of the swing network.
     #[arg(long, default_value_t = Settings::recipe().width, help_heading = "Training")]
     pub width: usize,
@@ -98,6 +103,7 @@ impl Execute for Args {
             unroll: self.unroll,
             learning_rate: self.lr,
             shapes: self.shapes,
+            bones: self.bones,
             width: self.width,
             seed: self.seed,
             inertia: self.inertia,

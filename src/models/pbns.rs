@@ -190,7 +190,10 @@ impl Pbns {
             let motion = Tensor::from_slice(&motion)
                 .view([poses.len() as i64, s.shape.motion_inputs() as i64])
                 .to_device(device);
-            batch.swing = Some(s.play(&motion, &batch.features));
+            let outputs = s.play(&motion, &batch.features);
+            // Swing bones turn the garment's skinning; the blend-shape part stays in `swing`.
+            batch.skinning = s.bend(&batch.skinning, &outputs);
+            batch.swing = Some(outputs);
         }
         batch
     }
@@ -200,7 +203,7 @@ impl Pbns {
     pub fn blend_weights(&self, batch: &PoseBatch) -> Tensor {
         let x = self.coefficients(&batch.features);
         match (&self.swing, &batch.swing) {
-            (Some(_), Some(y)) => Tensor::cat(&[&x, y], 1),
+            (Some(s), Some(y)) => Tensor::cat(&[&x, &s.blend_weights(y)], 1),
             (Some(_), None) => panic!("a swing model's batch needs its clip played in order"),
             (None, _) => x,
         }

@@ -6,7 +6,8 @@
 //! back, and the gravity direction), the pose features and the swing's own last two weights
 //! `Y_{t−1}, Y_{t−2}`. Over a clip played in order the weights are a recurrence from rest
 //! (`Y = 0`), so a baked clip is the same skin, the blend shapes `[D; E]` and one weight track:
-//! no runtime beyond blend shapes. The frame rate is part of the model (the recurrence is a time
+//! no runtime beyond blend shapes. A swing may also turn "swing bones" (see `SwingShape::bones`):
+//! the garment's copy of a joint rotated about the joint, as engines swing skirts. The frame rate is part of the model (the recurrence is a time
 //! step); clips are played at that rate.
 
 use crate::rig::{JointTransform, Skeleton};
@@ -29,6 +30,14 @@ pub struct SwingShape {
     pub layers: usize,
     /// Swing blend shapes `S`.
     pub shapes: usize,
+    /// Swing bones: joints whose garment copy turns by a learnt rotation about the joint's rest
+    /// position (a turn moves cloth without stretching it, which a blend shape cannot). Empty in
+    /// files without them.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub bones: Vec<usize>,
+    /// Each bone's pivot: its joint's rest position (metres, rest space).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub pivots: Vec<[f32; 3]>,
     pub vertices: usize,
     /// The rate the recurrence steps at (frames per second).
     pub fps: f32,
@@ -41,9 +50,14 @@ impl SwingShape {
         self.lags.len() * (6 + 3 * self.joints.len()) + 3
     }
 
-    /// All network inputs: motion history, pose features, the last two swing weights.
+    /// Network outputs per frame: `S` blend-shape weights, then a rotation vector per bone.
+    pub fn outputs(&self) -> usize {
+        self.shapes + 3 * self.bones.len()
+    }
+
+    /// All network inputs: motion history, pose features, the last two outputs.
     pub fn inputs(&self) -> usize {
-        self.motion_inputs() + self.pose_features + 2 * self.shapes
+        self.motion_inputs() + self.pose_features + 2 * self.outputs()
     }
 }
 
@@ -75,7 +89,7 @@ impl Swing {
         let mut fan_in = shape.inputs();
         for layer in 0..=shape.layers {
             let last = layer == shape.layers;
-            let out = if last { shape.shapes } else { shape.width };
+            let out = if last { shape.outputs() } else { shape.width };
             let bound = 1.0 / (fan_in as f64).sqrt() * if last { 0.1 } else { 1.0 };
             let w = Tensor::zeros([fan_in as i64, out as i64], opts).uniform_(-bound, bound);
             let b = Tensor::zeros([out as i64], opts);
@@ -147,7 +161,7 @@ impl Swing {
             let frames = motion.size()[0];
             let motion = self.normalise(motion);
             let zero = Tensor::zeros(
-                [1, self.shape.shapes as i64],
+                [1, self.shape.outputs() as i64],
                 (Kind::Float, motion.device()),
             );
             let (mut last, mut before) = (zero.shallow_clone(), zero.shallow_clone());
@@ -170,11 +184,44 @@ impl Swing {
         })
     }
 
-    /// The swing's displacement `Y·E` in rest space `[B, N, 3]`.
-    pub fn displacement(&self, weights: &Tensor) -> Tensor {
-        weights
+    /// The swing's displacement `Y·E` in rest space `[B, N, 3]` (from the first `S` outputs).
+    pub fn displacement(&self, outputs: &Tensor) -> Tensor {
+        self.blend_weights(outputs)
             .matmul(&self.basis)
             .view([-1, self.shape.vertices as i64, 3])
+    }
+
+    /// The blend-shape weights among the outputs `[B, S]`.
+    pub fn blend_weights(&self, outputs: &Tensor) -> Tensor {
+        outputs.narrow(1, 0, self.shape.shapes as i64)
+    }
+
+    /// Skinning matrices `[B, J, 12]` with each bone's joint turned by its rotation (the outputs
+    /// after the first `S`) about its rest position: `M'·v = M·(R·(v − p) + p)`.
+    pub fn bend(&self, skinning: &Tensor, outputs: &Tensor) -> Tensor {
+        let bones = self.shape.bones.len() as i64;
+        if bones == 0 {
+            return skinning.shallow_clone();
+        }
+        let b = skinning.size()[0];
+        let device = skinning.device();
+        let r = outputs
+            .narrow(1, self.shape.shapes as i64, 3 * bones)
+            .view([b, bones, 3]);
+        let rotation = rodrigues(&r);
+        let joints: Vec<i64> = self.shape.bones.iter().map(|&j| j as i64).collect();
+        let joints = Tensor::from_slice(&joints).to_device(device);
+        let pivots: Vec<f32> = self.shape.pivots.iter().flatten().copied().collect();
+        let pivot = Tensor::from_slice(&pivots)
+            .view([1, bones, 3, 1])
+            .to_device(device);
+        let m = skinning.index_select(1, &joints).view([b, bones, 3, 4]);
+        let linear = m.narrow(3, 0, 3);
+        let translation = m.narrow(3, 3, 1);
+        let turned = linear.matmul(&rotation);
+        let shift = translation + linear.matmul(&(&pivot - rotation.matmul(&pivot)));
+        let bent = Tensor::cat(&[turned, shift], 3).view([b, bones, 12]);
+        skinning.index_copy(1, &joints, &bent)
     }
 
     /// Checks a loaded network against its shape.
@@ -194,6 +241,13 @@ impl Swing {
                 s.inputs()
             );
         }
+        if s.bones.len() != s.pivots.len() {
+            bail!(
+                "swing: {} bones but {} pivots",
+                s.bones.len(),
+                s.pivots.len()
+            );
+        }
         if self.basis.size() != [s.shapes as i64, 3 * s.vertices as i64] {
             bail!(
                 "swing: basis {:?} does not match {} shapes",
@@ -203,6 +257,28 @@ impl Swing {
         }
         Ok(())
     }
+}
+
+/// Rotation matrices `[.., 3, 3]` from rotation vectors `[.., 3]` (Rodrigues), smooth at zero.
+fn rodrigues(r: &Tensor) -> Tensor {
+    let theta2 = r
+        .square()
+        .sum_dim_intlist(-1, true, Kind::Float)
+        .clamp_min(1e-12);
+    let theta = theta2.sqrt();
+    let a = (theta.sin() / &theta).unsqueeze(-1);
+    let c = ((-theta.cos() + 1.0) / &theta2).unsqueeze(-1);
+    let (x, y, z) = (r.select(-1, 0), r.select(-1, 1), r.select(-1, 2));
+    let zero = x.zeros_like();
+    let k = Tensor::stack(
+        &[&zero, &(-&z), &y, &z, &zero, &(-&x), &(-&y), &x, &zero],
+        -1,
+    );
+    let mut shape = r.size();
+    shape.push(3);
+    let k = k.view(shape.as_slice());
+    let eye = Tensor::eye(3, (Kind::Float, r.device()));
+    eye + &a * &k + &c * k.matmul(&k)
 }
 
 /// The motion-history inputs of a clip's frames played in order at `shape.fps`, `[F × M]` raw
@@ -277,9 +353,54 @@ mod tests {
             width: 8,
             layers: 1,
             shapes: 2,
+            bones: vec![],
+            pivots: vec![],
             vertices: 3,
             fps: 30.0,
         }
+    }
+
+    /// A bone turns its joint's garment skinning about the joint's rest position; other joints
+    /// and a zero rotation leave the matrices as they were, and the turn is differentiable at zero.
+    #[test]
+    fn a_bone_turns_its_joint_about_the_pivot() {
+        let mut shape = shape(vec![0]);
+        shape.shapes = 1;
+        shape.bones = vec![1];
+        shape.pivots = vec![[0.0, 1.0, 0.0]];
+        let swing = Swing::new(
+            shape,
+            Tensor::zeros([1], (Kind::Float, Device::Cpu)),
+            Tensor::ones([1], (Kind::Float, Device::Cpu)),
+            Device::Cpu,
+        );
+        let identity: Vec<f32> = [1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0.].repeat(2);
+        let skinning = Tensor::from_slice(&identity).view([1, 2, 12]);
+        let quarter = std::f32::consts::FRAC_PI_2;
+        let outputs = Tensor::from_slice(&[0.5f32, 0.0, 0.0, quarter]).view([1, 4]);
+        let bent = swing.bend(&skinning, &outputs);
+        let m: Vec<f32> = Vec::try_from(bent.view([-1])).unwrap();
+        assert_eq!(&m[..12], &identity[..12], "joint 0 is not a bone");
+        let v = [1.0f32, 1.0, 0.0];
+        let x: Vec<f32> = (0..3)
+            .map(|r| (0..3).map(|c| m[12 + 4 * r + c] * v[c]).sum::<f32>() + m[12 + 4 * r + 3])
+            .collect();
+        for (a, b) in x.iter().zip([0.0f32, 2.0, 0.0]) {
+            assert!((a - b).abs() < 1e-5, "{x:?}");
+        }
+        let still = swing.bend(
+            &skinning,
+            &Tensor::from_slice(&[0.5f32, 0.0, 0.0, 0.0]).view([1, 4]),
+        );
+        assert!(f64::try_from((still - &skinning).abs().max()).unwrap() < 1e-7);
+        let r = Tensor::zeros([1, 4], (Kind::Float, Device::Cpu)).set_requires_grad(true);
+        let g = Tensor::run_backward(
+            &[&swing.bend(&skinning, &r).sum(Kind::Float)],
+            &[&r],
+            false,
+            false,
+        );
+        assert!(bool::try_from(g[0].isfinite().all()).unwrap());
     }
 
     /// A root walking +x at 1.5 m/s while turned 90° about y reads as moving along its own −z
@@ -324,6 +445,8 @@ mod tests {
         let shape = SwingShape {
             layers: 0,
             shapes: 1,
+            bones: vec![],
+            pivots: vec![],
             ..shape(vec![0])
         };
         let m = shape.motion_inputs() as i64;

@@ -38,6 +38,9 @@ pub struct Settings {
     pub width: usize,
     pub layers: usize,
     pub shapes: usize,
+    /// Swing bones: the joints carrying most of the garment's skin, each turned by the network
+    /// (`models::swing::SwingShape::bones`); 0 for blend shapes only.
+    pub bones: usize,
     pub lags: Vec<usize>,
     pub fps: f32,
     /// Weight of the inertia term (1: physical; 0 turns the dynamics off, for ablations).
@@ -62,6 +65,7 @@ impl Settings {
             width: 128,
             layers: 2,
             shapes: 32,
+            bones: 0,
             lags: vec![0, 1, 2, 4, 8],
             fps: 30.0,
             // The fabric's own density leaves the sample skirt all but still (docs/swing.md).
@@ -140,8 +144,11 @@ pub struct EpochLine {
 
 impl Trainer {
     pub fn new(inputs: Inputs, settings: Settings) -> Result<Trainer> {
-        if settings.batch == 0 || settings.unroll == 0 || settings.shapes == 0 {
-            bail!("--batch, --unroll and --shapes must be positive");
+        if settings.batch == 0 || settings.unroll == 0 {
+            bail!("--batch and --unroll must be positive");
+        }
+        if settings.shapes + settings.bones == 0 {
+            bail!("--shapes and --bones are both 0: the swing would have nothing to move");
         }
         if settings.fps <= 0.0 {
             bail!("--fps must be positive");
@@ -161,6 +168,15 @@ impl Trainer {
             bail!("this PBNS already swings; start from the quasi-static model it was trained on");
         }
         let skeleton = model.body.skeleton.clone();
+        let rest_world = skeleton.rest_world();
+        let bones = skin_joints(&network.skin(), &skeleton, settings.bones);
+        let pivots = bones
+            .iter()
+            .map(|&j| {
+                let c = rest_world[j].fixed_view::<3, 1>(0, 3);
+                [c[0], c[1], c[2]]
+            })
+            .collect();
         let shape = SwingShape {
             lags: settings.lags.clone(),
             joints: network.feature_joints.clone(),
@@ -168,6 +184,8 @@ impl Trainer {
             width: settings.width,
             layers: settings.layers,
             shapes: settings.shapes,
+            bones,
+            pivots,
             vertices: network.shape.vertices,
             fps: settings.fps,
         };
@@ -240,7 +258,8 @@ impl Trainer {
             .map(<[_]>::to_vec)
             .collect();
         correspondences.refresh(&per_frame);
-        let states = Tensor::zeros([frames, settings.shapes as i64], (Kind::Float, device));
+        let outputs = network.swing.as_ref().map_or(0, |s| s.shape.outputs());
+        let states = Tensor::zeros([frames, outputs as i64], (Kind::Float, device));
         let info = SwingInfo {
             shape,
             training: SwingTraining {
@@ -325,7 +344,8 @@ impl Trainer {
     fn garment(&self, idx: &Tensor, y: &Tensor) -> (Tensor, Tensor) {
         let network = self.network();
         let rest = self.rest.index_select(0, idx) + self.swing().displacement(y);
-        let x = network.skin_points(&rest, &self.skinning.index_select(0, idx));
+        let skinning = self.swing().bend(&self.skinning.index_select(0, idx), y);
+        let x = network.skin_points(&rest, &skinning);
         (x, rest - network.template.unsqueeze(0))
     }
 
@@ -458,16 +478,21 @@ impl Trainer {
         Ok(values)
     }
 
-    /// RMS of the swing's rest-space displacement over the training frames (mm).
+    /// RMS of how far the swing moves the garment over the training frames (mm): blend shapes
+    /// and bones together, in the world.
     fn swing_rms_mm(&self) -> f64 {
         tch::no_grad(|| {
             let frames = self.states.size()[0] as usize;
             let mut sum = 0.0;
             for s in (0..frames).step_by(PREDICT_CHUNK) {
                 let n = PREDICT_CHUNK.min(frames - s);
-                let d = self
-                    .swing()
-                    .displacement(&self.states.narrow(0, s as i64, n as i64));
+                let idx = Tensor::arange_start(
+                    s as i64,
+                    (s + n) as i64,
+                    (Kind::Int64, self.settings.device),
+                );
+                let y = self.states.index_select(0, &idx);
+                let d = self.garment(&idx, &y).0 - self.garment(&idx, &y.zeros_like()).0;
                 sum += d.square().sum(Kind::Double).double_value(&[]);
             }
             let count = (frames * self.network().shape.vertices).max(1) as f64;
@@ -492,6 +517,23 @@ impl Trainer {
     }
 }
 
+/// At most `count` joints carrying more than 2 % of the garment's skin weight, most first.
+fn skin_joints(
+    skin: &crate::rig::Skin,
+    skeleton: &crate::rig::Skeleton,
+    count: usize,
+) -> Vec<usize> {
+    let mut share = vec![0.0f64; skeleton.joint_count()];
+    for (j, w) in skin.joint_indices.iter().zip(&skin.joint_weights) {
+        share[*j as usize] += f64::from(*w);
+    }
+    let n = skin.vertex_count() as f64;
+    let mut joints: Vec<usize> = (0..share.len()).filter(|&j| share[j] > 0.02 * n).collect();
+    joints.sort_by(|a, b| share[*b].total_cmp(&share[*a]));
+    joints.truncate(count);
+    joints
+}
+
 /// Blend shapes that turn the garment's part skinned to a joint about that joint (its skin weight
 /// times `a × (x − joint)`, for the three axes `a`), for the joints carrying most of the garment's
 /// skin, at most two thirds of `shapes`: a thigh's share of the skirt swinging about the hip is
@@ -503,15 +545,7 @@ fn joint_turns(
     shapes: usize,
 ) -> Tensor {
     let n = mesh.vertex_count();
-    let mut share = vec![0.0f64; skeleton.joint_count()];
-    for (j, w) in skin.joint_indices.iter().zip(&skin.joint_weights) {
-        share[*j as usize] += f64::from(*w);
-    }
-    let mut joints: Vec<usize> = (0..share.len())
-        .filter(|&j| share[j] > 0.02 * n as f64)
-        .collect();
-    joints.sort_by(|a, b| share[*b].total_cmp(&share[*a]));
-    joints.truncate(2 * shapes / 9);
+    let joints = skin_joints(skin, skeleton, 2 * shapes / 9);
     let rest = skeleton.rest_world();
     let mut out = Vec::new();
     for &j in &joints {
