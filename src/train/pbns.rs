@@ -105,7 +105,7 @@ impl Settings {
         train_weights: true,
         seed: 0,
         pose_threshold: 0.15,
-        pose_budget: 600,
+        pose_budget: 300,
         joint_share: 0.01,
         validation: 0.15,
         recombine: 0,
