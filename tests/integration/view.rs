@@ -118,47 +118,7 @@ fn page_matches_the_preview_silhouette_and_lists_every_clip() {
         "the selector lists every animation"
     );
     for frame in [12, 61] {
-        let shot = screenshot(
-            &page,
-            &format!("clip=131_02&frame={frame}&view=front&ui=0"),
-            &dir.join(format!("page_{frame}.png")),
-        );
-        let preview = dir.join(format!("preview_{frame}.png"));
-        garmentbake_ok(&[
-            "preview",
-            "--body",
-            s("body.glb"),
-            "--model",
-            model().to_str().unwrap(),
-            "--motion",
-            s("motions/131_02.bvh"),
-            "--fps",
-            "10",
-            "--frame-list",
-            &frame.to_string(),
-            "--views",
-            "front",
-            "--width",
-            &W.to_string(),
-            "--height",
-            &H.to_string(),
-            "--out",
-            preview.to_str().unwrap(),
-        ]);
-        let preview = image::open(&preview).unwrap().to_rgb8();
-        assert_eq!(shot.dimensions(), preview.dimensions());
-        let (a, b) = (garment_mask(&shot), garment_mask(&preview));
-        let score = iou(&a, &b);
-        eprintln!(
-            "frame {frame}: IoU {score:.4} ({} page, {} preview garment pixels)",
-            a.iter().filter(|x| **x).count(),
-            b.iter().filter(|x| **x).count()
-        );
-        assert!(
-            b.iter().filter(|x| **x).count() > 2000,
-            "garment too small to judge"
-        );
-        assert!(score >= 0.95, "frame {frame}: IoU {score:.4} < 0.95");
+        page_matches_preview(&page, &dir, frame, "bake page");
     }
 }
 
@@ -194,43 +154,7 @@ fn a_vat_plays_in_the_page_as_the_preview_shows_the_network() {
     ]);
     assert_eq!(report["garment_vertices"], 2847, "{report}");
     for frame in [12, 61] {
-        let shot = screenshot(
-            &page,
-            &format!("clip=131_02&frame={frame}&view=front&ui=0"),
-            &dir.join(format!("page_{frame}.png")),
-        );
-        let preview = dir.join(format!("preview_{frame}.png"));
-        garmentbake_ok(&[
-            "preview",
-            "--body",
-            s("body.glb"),
-            "--model",
-            model().to_str().unwrap(),
-            "--motion",
-            s("motions/131_02.bvh"),
-            "--fps",
-            "10",
-            "--frame-list",
-            &frame.to_string(),
-            "--views",
-            "front",
-            "--width",
-            &W.to_string(),
-            "--height",
-            &H.to_string(),
-            "--out",
-            preview.to_str().unwrap(),
-        ]);
-        let preview = image::open(&preview).unwrap().to_rgb8();
-        let (a, b) = (garment_mask(&shot), garment_mask(&preview));
-        let score = iou(&a, &b);
-        eprintln!(
-            "VAT page, frame {frame}: IoU {score:.4} with the preview ({} page, {} preview garment pixels)",
-            a.iter().filter(|x| **x).count(),
-            b.iter().filter(|x| **x).count()
-        );
-        assert!(b.iter().filter(|x| **x).count() > 2000);
-        assert!(score >= 0.95, "frame {frame}: IoU {score:.4} < 0.95");
+        page_matches_preview(&page, &dir, frame, "VAT page");
         // The 16-bit VAT alone against the first page with its body hidden.
         let hash = format!("frame={frame}&view=front&ui=0&body=0");
         let bare = screenshot(&page, &hash, &dir.join(format!("bare_{frame}.png")));
@@ -239,6 +163,55 @@ fn a_vat_plays_in_the_page_as_the_preview_shows_the_network() {
         eprintln!("view walk16.vat.png, frame {frame}: IoU {score:.4} with the eval page's VAT");
         assert!(score >= 0.95, "frame {frame}: IoU {score:.4} < 0.95");
     }
+}
+
+/// The page's garment at `frame` of 131_02 (front view) against `preview` of the network at the
+/// same frame: the same image size, a garment large enough to judge, IoU ≥ 0.95.
+fn page_matches_preview(page: &Path, dir: &Path, frame: usize, what: &str) {
+    let shot = screenshot(
+        page,
+        &format!("clip=131_02&frame={frame}&view=front&ui=0"),
+        &dir.join(format!("page_{frame}.png")),
+    );
+    let preview = dir.join(format!("preview_{frame}.png"));
+    garmentbake_ok(&[
+        "preview",
+        "--body",
+        s("body.glb"),
+        "--model",
+        model().to_str().unwrap(),
+        "--motion",
+        s("motions/131_02.bvh"),
+        "--fps",
+        "10",
+        "--frame-list",
+        &frame.to_string(),
+        "--views",
+        "front",
+        "--width",
+        &W.to_string(),
+        "--height",
+        &H.to_string(),
+        "--out",
+        preview.to_str().unwrap(),
+    ]);
+    let preview = image::open(&preview).unwrap().to_rgb8();
+    assert_eq!(shot.dimensions(), preview.dimensions());
+    let (a, b) = (garment_mask(&shot), garment_mask(&preview));
+    let score = iou(&a, &b);
+    eprintln!(
+        "{what}, frame {frame}: IoU {score:.4} with the preview ({} page, {} preview garment pixels)",
+        a.iter().filter(|x| **x).count(),
+        b.iter().filter(|x| **x).count()
+    );
+    assert!(
+        b.iter().filter(|x| **x).count() > 2000,
+        "garment too small to judge"
+    );
+    assert!(
+        score >= 0.95,
+        "{what}, frame {frame}: IoU {score:.4} < 0.95"
+    );
 }
 
 /// The network's garment on the first frames of 131_02 at 10 fps, as the model's vertices
