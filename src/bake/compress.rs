@@ -148,6 +148,19 @@ impl Spectrum {
     /// Keeps the `count` strongest directions; errors measured against `reference`, the offsets
     /// to reproduce (3N × frames, see [`offset_matrix`]).
     pub fn truncate(&self, reference: &DMatrix<f32>, count: usize) -> Compressed {
+        let (targets, weights) = self.leading(count);
+        let (max_error, mean_error) = errors(reference, &targets, &weights);
+        Compressed {
+            targets,
+            weights,
+            max_error,
+            mean_error,
+        }
+    }
+
+    /// The `count` strongest directions as targets and their weights per frame, unmeasured
+    /// ([`Spectrum::truncate`] without the errors, which need the offsets themselves).
+    pub fn leading(&self, count: usize) -> (Vec<Vec<[f32; 3]>>, Vec<Vec<f32>>) {
         let count = count.min(self.rank());
         let n = self.directions.nrows() / 3;
         let targets = (0..count)
@@ -164,13 +177,7 @@ impl Spectrum {
                     .collect()
             })
             .collect();
-        let (max_error, mean_error) = errors(reference, &targets, &weights);
-        Compressed {
-            targets,
-            weights,
-            max_error,
-            mean_error,
-        }
+        (targets, weights)
     }
 
     /// The smallest count whose max error is within `tolerance` (m); the full rank otherwise.
