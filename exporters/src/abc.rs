@@ -91,8 +91,21 @@ fn spec(caches: &[PointCache], space: CacheSpace) -> Value<'_> {
                 (
                     "uvs",
                     c.uvs
-                        .as_deref()
-                        .map_or(Value::None, |uv| Value::F32(Cow::Owned(flat(uv)))),
+                        .as_ref()
+                        .map_or(Value::None, |uv| Value::F32(Cow::Owned(flat(&uv.coords)))),
+                ),
+                // Each corner's UV, in the faces' (clockwise) corner order.
+                (
+                    "uv_indices",
+                    c.uvs.as_ref().map_or(Value::None, |uv| {
+                        Value::I32(Cow::Owned(
+                            uv.triangles
+                                .iter()
+                                .flat_map(|t| [t[0], t[2], t[1]])
+                                .map(|i| i as i32)
+                                .collect(),
+                        ))
+                    }),
                 ),
             ])
         })

@@ -231,12 +231,21 @@ pub struct PointCache {
     pub name: String,
     pub fps: f32,
     pub triangles: Vec<[u32; 3]>,
-    /// One UV per point, when the mesh has them.
-    pub uvs: Option<Vec<[f32; 2]>>,
+    /// The mesh's UVs, when it has them: face-varying (a seam vertex has one UV per side).
+    pub uvs: Option<CacheUvs>,
     pub point_count: usize,
     /// Frame-major: `points[frame * point_count + vertex]` (one flat buffer, so a writer hands
     /// whole frames to its format without copying vertex by vertex).
     pub points: Vec<[f32; 3]>,
+}
+
+/// Face-varying UVs of a point cache: the coordinates, and per triangle (in the cache's
+/// triangle order) the coordinate each corner takes. Writers store them indexed, as DCCs do
+/// (Alembic's indexed face-varying `uv`, USD's indexed `faceVarying` `primvars:st`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CacheUvs {
+    pub coords: Vec<[f32; 2]>,
+    pub triangles: Vec<[u32; 3]>,
 }
 
 impl PointCache {
@@ -269,11 +278,27 @@ impl PointCache {
                 self.name
             ));
         }
-        if self.uvs.as_ref().is_some_and(|uv| uv.len() != n) {
-            return Err(format!(
-                "point cache '{}': UVs do not match {n} points",
-                self.name
-            ));
+        if let Some(uv) = &self.uvs {
+            if uv.triangles.len() != self.triangles.len() {
+                return Err(format!(
+                    "point cache '{}': {} UV triangles for {} triangles",
+                    self.name,
+                    uv.triangles.len(),
+                    self.triangles.len()
+                ));
+            }
+            if let Some(i) = uv
+                .triangles
+                .iter()
+                .flatten()
+                .find(|&&i| i as usize >= uv.coords.len())
+            {
+                return Err(format!(
+                    "point cache '{}': UV index {i} out of range ({} UVs)",
+                    self.name,
+                    uv.coords.len()
+                ));
+            }
         }
         Ok(())
     }

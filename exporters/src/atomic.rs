@@ -175,6 +175,14 @@ impl OutputSet {
                     ),
                 ));
             }
+            // Alembic is written through the Python bridge: a venv without `alembic3d` is bad
+            // input, refused here rather than when the cache is written, after the work.
+            #[cfg(feature = "usd")]
+            if crate::FileKind::written(o.path) == Some(crate::FileKind::Alembic) {
+                python_bridge::check_alembic().map_err(|e| {
+                    Error::new(ErrorKind::InvalidInput, format!("{} {shown}: {e}", o.flag))
+                })?;
+            }
             let dir = o.path.parent().unwrap_or(Path::new("")).to_path_buf();
             let shown_dir = if dir.as_os_str().is_empty() {
                 Path::new(".")

@@ -440,7 +440,20 @@ fn mesh_cache_spec<'a>(cache: &'a PointCache, name: &str) -> Value<'a> {
         ("points", f32s(&cache.points)),
         ("extents", Value::F32(Cow::Owned(extents))),
         ("face_indices", triangles(&cache.triangles)),
-        ("uvs", cache.uvs.as_deref().map_or(Value::None, f32s)),
+        (
+            "uvs",
+            cache
+                .uvs
+                .as_ref()
+                .map_or(Value::None, |uv| f32s(&uv.coords)),
+        ),
+        (
+            "uv_indices",
+            cache
+                .uvs
+                .as_ref()
+                .map_or(Value::None, |uv| triangles(&uv.triangles)),
+        ),
         ("color", Value::None),
     ])
 }

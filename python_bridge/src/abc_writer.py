@@ -48,11 +48,13 @@ def write_point_caches(spec, path):
             counts[i] = 3
         uvs = AbcGeom.OV2fGeomParamSample()
         if m.get("uvs") is not None:
-            # Indexed face-varying UVs (what DCCs write): the per-point values, indexed by corner.
-            values = imath.V2fArrayFromBuffer(m["uvs"].cast("B").cast("f", (n, 2)))
-            corners = imath.UnsignedIntArray(len(indices))
-            for i in range(len(indices)):
-                corners[i] = indices[i]
+            # Indexed face-varying UVs (what DCCs write): the coordinates, and each corner's
+            # index into them in the faces' corner order.
+            values = imath.V2fArrayFromBuffer(m["uvs"].cast("B").cast("f", (len(m["uvs"]) // 2, 2)))
+            uv_indices = m["uv_indices"]
+            corners = imath.UnsignedIntArray(len(uv_indices))
+            for i in range(len(uv_indices)):
+                corners[i] = uv_indices[i]
             uvs = AbcGeom.OV2fGeomParamSample(values, corners, AbcGeom.GeometryScope.kFacevaryingScope)
         for f in range(frames):
             p = _v3(points[f * 3 * n:(f + 1) * 3 * n])

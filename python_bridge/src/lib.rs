@@ -196,6 +196,12 @@ fn abc_writer(py: Python<'_>) -> Result<&Bound<'_, PyModule>, BridgeError> {
     Ok(module.bind(py))
 }
 
+/// Whether `alembic3d` imports from the venv: checked before a command's work when it is to
+/// write `.abc` (the missing module is then bad input, found before minutes of computation).
+pub fn check_alembic() -> Result<(), BridgeError> {
+    Python::attach(|py| abc_writer(py).map(|_| ()))
+}
+
 /// Calls `abc_writer.write_point_caches(spec, path)` (an Ogawa archive). The caller owns
 /// atomicity (temporary name, rename).
 pub fn write_alembic(spec: &Value<'_>, path: &Path) -> Result<(), BridgeError> {

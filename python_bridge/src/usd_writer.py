@@ -47,7 +47,13 @@ def _mesh_topology(mesh, m):
     mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
     # Garments are open surfaces: both sides must render.
     mesh.CreateDoubleSidedAttr(True)
-    if m.get("uvs") is not None:
+    if m.get("uv_indices") is not None:
+        # A point cache's face-varying UVs: the coordinates, indexed per face corner.
+        st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar(
+            "st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.faceVarying)
+        st.Set(Vt.Vec2fArray.FromBuffer(m["uvs"]))
+        st.SetIndices(Vt.IntArray.FromBuffer(m["uv_indices"]))
+    elif m.get("uvs") is not None:
         st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar(
             "st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex)
         st.Set(Vt.Vec2fArray.FromBuffer(m["uvs"]))

@@ -86,7 +86,10 @@ pub fn write_caches_in(
                     name: name.into(),
                     fps,
                     triangles: mesh.triangles.clone(),
-                    uvs: None,
+                    uvs: mesh.uv.as_ref().map(|uv| exporters::asset::CacheUvs {
+                        coords: uv.coords.clone(),
+                        triangles: uv.triangles.clone(),
+                    }),
                     point_count: mesh.vertex_count(),
                     points: frames.iter().flatten().map(|&p| space.point(p)).collect(),
                 })

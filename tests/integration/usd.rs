@@ -453,8 +453,12 @@ fn cache_of(body: &Body, anim: &SkelAnimation, frames: usize) -> asset::PointCac
     asset::PointCache {
         name: "body cache".into(),
         fps: anim.fps,
+        // One UV per point: the face-varying set indexes them as the faces index the points.
+        uvs: mesh.uvs.map(|coords| asset::CacheUvs {
+            coords,
+            triangles: mesh.triangles.clone(),
+        }),
         triangles: mesh.triangles,
-        uvs: mesh.uvs,
         point_count: body.mesh.vertex_count(),
         points: (0..frames)
             .flat_map(|f| our_lbs(body, &body.skin, &body.mesh.positions, anim, f))
@@ -609,7 +613,10 @@ fn slow_bench_usd_writer() {
         name: "bench".into(),
         fps: 30.0,
         triangles: (0..n as u32 - 2).map(|i| [i, i + 1, i + 2]).collect(),
-        uvs: Some((0..n).map(|i| [i as f32 / n as f32, 0.5]).collect()),
+        uvs: Some(asset::CacheUvs {
+            coords: (0..n).map(|i| [i as f32 / n as f32, 0.5]).collect(),
+            triangles: (0..n as u32 - 2).map(|i| [i, i + 1, i + 2]).collect(),
+        }),
         point_count: n,
         points: (0..frames * n)
             .map(|i| {

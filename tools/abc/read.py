@@ -2,10 +2,13 @@
 writer never reads), for the tests that run without Blender.
 
 usage (the project venv's python: .venv/bin/python):
-  read.py FILE.abc [--pc2 REF.pc2 [--mesh NAME]]
+  read.py FILE.abc [--pc2 REF.pc2 [--mesh NAME]] [--obj GARMENT.obj]
 Prints JSON {meshes: [{path, samples, time_per_sample, start_time, faces, uv_scope, user:
-{key: value}, self_bounds_ok}], pc2: {frames, points, max_abs}} — with --pc2, every sample of
+{key: value}, self_bounds_ok}], pc2: {frames, points, max_abs}, obj_uvs: {...}} — with --pc2, every sample of
 the PolyMesh NAME (or its Xform NAME; default the first) against the PC2's frames (same vertex order), the largest coordinate difference.
+With --obj, that PolyMesh's UVs (the indexed `uv` param, expanded per face corner) against the
+OBJ's own (parsed here: each corner's vertex and `vt`): `corners` read, `unmatched` corners whose
+(vertex, UV) pair the OBJ lacks, `uncovered` OBJ pairs the file lacks, `max_uv_diff`.
 """
 
 import argparse
@@ -51,11 +54,51 @@ def read_pc2(path):
     return frames.reshape(samples, points, 3)
 
 
+def obj_pairs(path):
+    """The OBJ's (vertex, UV) corner pairs, 0-based, as a map vertex -> its distinct UVs."""
+    vt, pairs = [], {}
+    with open(path) as fh:
+        for line in fh:
+            w = line.split()
+            if not w:
+                continue
+            if w[0] == "vt":
+                vt.append((float(w[1]), float(w[2])))
+            elif w[0] == "f":
+                for corner in w[1:]:
+                    parts = corner.split("/")
+                    v, t = int(parts[0]) - 1, int(parts[1]) - 1
+                    uvs = pairs.setdefault(v, [])
+                    if vt[t] not in uvs:
+                        uvs.append(vt[t])
+    return pairs
+
+
+def compare_uvs(corners, obj):
+    """`corners`: (vertex, (u, v)) per face corner of the file, against the OBJ's pairs."""
+    worst, unmatched, covered = 0.0, 0, set()
+    for v, uv in corners:
+        options = obj.get(v, [])
+        if not options:
+            unmatched += 1
+            continue
+        d, k = min((max(abs(uv[0] - o[0]), abs(uv[1] - o[1])), k) for k, o in enumerate(options))
+        worst = max(worst, d)
+        if d > 1e-6:
+            unmatched += 1
+        else:
+            covered.add((v, k))
+    total = sum(len(o) for o in obj.values())
+    return {"corners": len(corners), "unmatched": unmatched, "uncovered": total - len(covered),
+            "obj_pairs": total, "max_uv_diff": worst}
+
+
 def main(argv):
     ap = argparse.ArgumentParser()
     ap.add_argument("file")
     ap.add_argument("--pc2")
     ap.add_argument("--mesh")
+    ap.add_argument("--obj")
     a = ap.parse_args(argv)
     archive = Abc.IArchive(a.file)
     found = []
@@ -94,6 +137,18 @@ def main(argv):
             p = np.array([[q[0], q[1], q[2]] for q in pos])
             worst = max(worst, float(np.abs(p - ref[s]).max()))
         out["pc2"] = {"frames": int(ref.shape[0]), "points": int(ref.shape[1]), "max_abs": worst}
+    if a.obj:
+        named = [o for o in found if a.mesh in (None, o.getName(), o.getParent().getName())]
+        schema = AbcGeom.IPolyMesh(named[0], Abc.WrapExistingFlag.kWrapExisting).getSchema()
+        faces = list(at(schema, 0).getFaceIndices())
+        param = schema.getUVsParam()
+        if not param.valid():
+            out["obj_uvs"] = None
+        else:
+            sample = param.getIndexedValue(Abc.ISampleSelector(schema.getTimeSampling().getSampleTime(0)))
+            vals, idx = sample.getVals(), sample.getIndices()
+            corners = [(faces[i], (vals[idx[i]][0], vals[idx[i]][1])) for i in range(len(faces))]
+            out["obj_uvs"] = compare_uvs(corners, obj_pairs(a.obj))
     print(json.dumps(out))
     return 0
 

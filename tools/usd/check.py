@@ -20,6 +20,10 @@ usage (the project venv's python: .venv/bin/python):
       the time-sampled `points` of the default prim (a Mesh), or of the Mesh NAME under it,
       against REF.f32; also checks that every `extent` sample bounds its points. Prints JSON
       {frames, points, max_abs, extent_ok}.
+  check.py uvs FILE [--mesh NAME] --obj GARMENT.obj
+      the `primvars:st` of that Mesh as UsdGeom.Primvar computes it (ComputeFlattened, per face
+      corner with faceVertexIndices) against the OBJ's own (vertex, vt) corner pairs, parsed here.
+      Prints JSON {interpolation, indexed, corners, unmatched, uncovered, obj_pairs, max_uv_diff}.
 """
 
 import argparse
@@ -246,6 +250,64 @@ def points(path, mesh_name, reference):
     return 0
 
 
+def _obj_pairs(path):
+    """The OBJ's (vertex, UV) corner pairs, 0-based, as a map vertex -> its distinct UVs."""
+    vt, pairs = [], {}
+    with open(path) as fh:
+        for line in fh:
+            w = line.split()
+            if not w:
+                continue
+            if w[0] == "vt":
+                vt.append((float(w[1]), float(w[2])))
+            elif w[0] == "f":
+                for corner in w[1:]:
+                    parts = corner.split("/")
+                    v, t = int(parts[0]) - 1, int(parts[1]) - 1
+                    uvs = pairs.setdefault(v, [])
+                    if vt[t] not in uvs:
+                        uvs.append(vt[t])
+    return pairs
+
+
+def uvs(path, mesh_name, obj):
+    stage = Usd.Stage.Open(path)
+    prim = stage.GetDefaultPrim()
+    if mesh_name:
+        prim = stage.GetPrimAtPath(prim.GetPath().AppendChild(mesh_name))
+    if not prim or not prim.IsA(UsdGeom.Mesh):
+        raise SystemExit("no mesh %s in %s" % (mesh_name or "as the default prim", path))
+    st = UsdGeom.PrimvarsAPI(prim).GetPrimvar("st")
+    if not st:
+        print(json.dumps({"file": path, "st": None}))
+        return 0
+    faces = list(UsdGeom.Mesh(prim).GetFaceVertexIndicesAttr().Get())
+    flat = st.ComputeFlattened()
+    interpolation = st.GetInterpolation()
+    if interpolation == UsdGeom.Tokens.faceVarying:
+        corners = [(faces[i], (flat[i][0], flat[i][1])) for i in range(len(faces))]
+    else:
+        corners = [(v, (flat[v][0], flat[v][1])) for v in faces]
+    pairs = _obj_pairs(obj)
+    worst, unmatched, covered = 0.0, 0, set()
+    for v, uv in corners:
+        options = pairs.get(v, [])
+        if not options:
+            unmatched += 1
+            continue
+        d, k = min((max(abs(uv[0] - o[0]), abs(uv[1] - o[1])), k) for k, o in enumerate(options))
+        worst = max(worst, d)
+        if d > 1e-6:
+            unmatched += 1
+        else:
+            covered.add((v, k))
+    total = sum(len(o) for o in pairs.values())
+    print(json.dumps({"file": path, "interpolation": str(interpolation), "indexed": st.IsIndexed(),
+                      "corners": len(corners), "unmatched": unmatched,
+                      "uncovered": total - len(covered), "obj_pairs": total, "max_uv_diff": worst}))
+    return 0
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -262,6 +324,10 @@ def main():
     p.add_argument("file")
     p.add_argument("--mesh")
     p.add_argument("--reference", required=True)
+    u = sub.add_parser("uvs")
+    u.add_argument("file")
+    u.add_argument("--mesh")
+    u.add_argument("--obj", required=True)
     a = ap.parse_args()
     if a.cmd == "validate":
         return validate(a.file)
@@ -269,6 +335,8 @@ def main():
         return info(a.file)
     if a.cmd == "replay":
         return replay(a.file, a.mesh, a.clip, a.method, a.reference, a.stride)
+    if a.cmd == "uvs":
+        return uvs(a.file, a.mesh, a.obj)
     return points(a.file, a.mesh, a.reference)
 
 
