@@ -34,6 +34,8 @@ pub struct Report {
     /// The bake and its writing: the work Blender's export does (its phases summed).
     pub bake_s: f64,
     pub bytes: u64,
+    /// SHA-256 of the glb timed: the bytes `bake` writes for the same flags.
+    pub sha256: String,
     pub blender: Option<BlenderExport>,
 }
 
@@ -85,8 +87,9 @@ pub fn run(request: &Request, say: &dyn Fn(&str)) -> Result<Report> {
     } else {
         None
     };
-    let bytes = std::fs::metadata(&ours).map_or(0, |m| m.len());
+    let written = std::fs::read(&ours).with_context(|| format!("cannot read {}", ours.display()));
     let _ = std::fs::remove_dir_all(&dir);
+    let written = written?;
     Ok(Report {
         frames: report.clips.iter().map(|c| c.frames).sum(),
         targets: report.targets,
@@ -95,7 +98,8 @@ pub fn run(request: &Request, say: &dyn Fn(&str)) -> Result<Report> {
         phases: report.phases,
         write_s,
         bake_s,
-        bytes,
+        bytes: written.len() as u64,
+        sha256: crate::io::digest::sha256_hex(&written),
         blender,
     })
 }
