@@ -7,8 +7,9 @@
 # src/ listed once, nothing listed that src/ lacks, layers numbered 1.. with no gap, src/lib.rs's
 # `pub mod`s and its header's numbered list equal to the table.
 # And the house rules of src/cli/ (docs/architecture.md, "Where to add… A command"): a command
-# file imports no other command's module (only the shared cli/args.rs and cli/mod.rs), no
-# module below cli imports `cli::`, and a command file stays within CLI_LINES lines.
+# file imports no other command's module (only the shared cli/args.rs, its files under cli/args/,
+# and cli/mod.rs), no module below cli imports `cli::`, and every file of src/cli/ (its
+# subfolders too) stays within CLI_LINES lines.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 python3 - "$@" <<'PY'
@@ -100,16 +101,14 @@ for f in sorted(src.rglob("*.rs")):
 # src/cli/: commands are thin, and each stands alone.
 CLI_LINES = 250
 # Over the limit today, to be thinned (issue 39); each must leave this list when it fits.
-CLI_TOO_LONG = {
-    "args.rs": "the shared flags and their help (TrainInputs alone is ~150 lines)",
-    "eval.rs": "its report types and their printing",
-    "bench.rs": "the Blender side of bench rollout",
-}
+CLI_TOO_LONG = {}
 cli = src / "cli"
 commands = {p.stem for p in cli.glob("*.rs")} - {"mod", "args"}
-for f in sorted(cli.glob("*.rs")):
+for f in sorted(cli.rglob("*.rs")):
     lines = f.read_text().splitlines()
-    if f.stem not in ("mod", "args"):
+    # The shared flags: cli/args.rs and the files of its submodules (cli/args/*.rs).
+    shared = f.stem in ("mod", "args") and f.parent == cli or f.parent == cli / "args"
+    if not shared:
         for n, line in enumerate(lines, 1):
             code = line.split("//")[0]
             named = re.findall(r"\b(?:super|crate::cli)::([a-z_][a-z0-9_]*)", code)
@@ -142,5 +141,5 @@ if bad:
     print("\nagainst the layer table (docs/architecture.md):", *bad, sep="\n  ", file=sys.stderr)
     sys.exit(1)
 print(f"ok: every import points to a lower layer; no command imports another; cli files within "
-      f"{CLI_LINES} lines but {len(CLI_TOO_LONG)} listed")
+      f"{CLI_LINES} lines" + (f" but {len(CLI_TOO_LONG)} listed" if CLI_TOO_LONG else ""))
 PY

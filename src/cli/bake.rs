@@ -145,8 +145,8 @@ impl Execute for Args {
             ),
             ("--view", self.view.as_deref(), super::args::Writes::Page),
         ])?;
-        let (model, device) = self.compute.load_model(&self.model)?;
-        let maps = self.clips.reader()?;
+        let (model, device) = crate::pipeline::load_model(&self.compute.compute(), &self.model)?;
+        let maps = self.clips.clips().reader()?;
         let fps = crate::models::swing::clip_rate(model.pbns()?, self.clips.fps)?;
         let clips = self
             .clips

@@ -4,7 +4,6 @@
 use super::args::{output_set, ClipArgs, CollisionFixArgs, ComputeArgs, OutputArgs, PNG};
 use super::Execute;
 use crate::compare::{Report, Settings};
-use crate::compute::Compute;
 use crate::pipeline::compare::{run, Request};
 use anyhow::{bail, Result};
 use std::path::PathBuf;
@@ -118,7 +117,7 @@ impl Execute for Args {
                 .collect::<Result<_>>()?,
             baseline: self.baseline.clone(),
             frames: self.frames,
-            compute: Compute::new(&self.compute.device, self.compute.threads),
+            compute: self.compute.compute(),
             settings: Settings {
                 horizon: self.horizon,
                 restart_every: self.restart_every,

@@ -86,7 +86,7 @@ impl Execute for Args {
             bail!("--between takes two frames, A,B");
         };
         let outputs = output_set(&[("--out", Some(&self.out), POINT_CACHE)])?;
-        let (file, _device) = self.compute.load_model(&self.model)?;
+        let (file, _device) = crate::pipeline::load_model(&self.compute.compute(), &self.model)?;
         let fps = file.info.dynamic()?.fps;
         let maps = read_maps(&self.maps)?;
         let clip = load_clip(&self.motion, &maps, &file.body.skeleton, Some(fps))?.animation;

@@ -57,7 +57,7 @@ impl Execute for Args {
     fn execute(&self, say: &dyn Fn(&str)) -> Result<Report> {
         let outputs = output_set(&[("--out", Some(&self.out), ASSET)])?;
         let body = read_body(&self.body)?;
-        let reader = self.clips.reader()?;
+        let reader = self.clips.clips().reader()?;
         let mut asset = exporters::BakedAsset {
             skeleton: skeleton_asset(&body.skeleton),
             meshes: vec![skinned_mesh_asset(

@@ -5,7 +5,6 @@
 use super::args::{output_set, CollisionFixArgs, ComputeArgs, OutputArgs, Writes, POINT_CACHE};
 use super::Execute;
 use crate::bake::compress::Targets;
-use crate::compute::Compute;
 use crate::pipeline::rollout::{run, Request};
 use crate::pipeline::Feedback;
 use anyhow::Result;
@@ -146,7 +145,7 @@ impl Execute for Args {
         let targets = Targets::from_flags(self.max_targets, tolerance, Targets::Full)?;
         let request = Request {
             model: self.model.clone(),
-            compute: Compute::new(&self.compute.device, self.compute.threads),
+            compute: self.compute.compute(),
             motions: self.motions.clone(),
             maps: self.maps.clone(),
             fade: self.fade,

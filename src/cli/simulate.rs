@@ -142,7 +142,8 @@ impl Execute for Args {
             bail!("{}: {p}", self.garment.display());
         }
         let fabric = self.fabric.load()?;
-        let (motion, clip) = self.clips.load_single(&body.skeleton)?;
+        let clips = self.clips.clips();
+        let (motion, clip) = clips.load_single(&body.skeleton)?;
         let mut settings = self.settings()?;
         settings.blender = simulate::blender::find(self.blender.as_deref())?;
         let scene = Scene {

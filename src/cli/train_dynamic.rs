@@ -5,7 +5,6 @@ use super::args::{
     output_set, ClipArgs, CollisionFixArgs, ComputeArgs, FabricArgs, OutputArgs, Writes, MODEL,
 };
 use super::Execute;
-use crate::compute::Compute;
 use crate::pipeline::train_dynamic::{run, Request, Stage};
 use crate::pipeline::Feedback;
 use anyhow::Result;
@@ -237,7 +236,7 @@ impl Execute for Args {
             out: self.out.clone(),
             resume: self.resume,
             log: self.log.clone(),
-            compute: Compute::new(&self.compute.device, self.compute.threads),
+            compute: self.compute.compute(),
         };
         let hide_bars = self.output.json;
         run(&request, &Feedback { say, hide_bars })

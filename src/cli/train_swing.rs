@@ -96,7 +96,7 @@ impl Execute for Args {
             ("--out", Some(&self.out), MODEL),
             ("--log", self.log.as_deref(), Writes::Any),
         ])?;
-        let (model, device) = self.compute.load_model(&self.from)?;
+        let (model, device) = crate::pipeline::load_model(&self.compute.compute(), &self.from)?;
         let settings = Settings {
             epochs: self.epochs,
             batch: self.batch,
@@ -114,7 +114,7 @@ impl Execute for Args {
         let inputs = Inputs::read(
             model,
             &self.clips.motions,
-            &self.clips.reader()?,
+            &self.clips.clips().reader()?,
             settings.fps,
         )?;
         let mut trainer = Trainer::new(inputs, settings)?;

@@ -1,7 +1,8 @@
 //! `garmentbake validate`: the pipeline gate — exit 0 only when a file is right.
 
-use super::args::{output_set, ClipArgs, ComputeArgs, OutputArgs, PNG};
+use super::args::{output_set, ComputeArgs, OutputArgs, PNG};
 use super::Execute;
+use crate::pipeline::Clips;
 use crate::validate::replay::{error_png, Reference, ReplayError};
 use crate::validate::{check_file, checkable, Checked, Problem};
 use anyhow::{bail, Result};
@@ -92,20 +93,20 @@ impl Args {
         let (Some(path), Some(motion)) = (&self.model, &self.motion) else {
             return Ok(None);
         };
-        let (model, device) = self.compute.load_model(path)?;
+        let (model, device) = crate::pipeline::load_model(&self.compute.compute(), path)?;
         if model.pbns().is_err() {
             bail!(
                 "{}: a dynamic model's garment depends on its roll-out (start, collision fix): validate the roll-out's cache with --reference ROLLOUT.pc2, or run `rollout --validate`",
                 path.display()
             );
         }
-        let clips = ClipArgs {
-            motions: vec![motion.clone()],
-            maps: self.maps.clone(),
-            fps: self.fps,
-            up: None,
-            units: None,
-        };
+        let clips = Clips::new(
+            std::slice::from_ref(motion),
+            &self.maps,
+            self.fps,
+            None,
+            None,
+        );
         let fps = crate::models::swing::clip_rate(model.pbns()?, self.fps)?;
         let (_, clip) = clips.load_single_at(model.skeleton(), fps)?;
         Ok(Some(Reference::of(&model, &clip.animation, device)?))

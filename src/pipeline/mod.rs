@@ -3,14 +3,20 @@
 //! inputs, calls it and prints the result; the work is here, callable without a command line.
 //!
 //! - `preview`: clips, caches and models posed into the shots of a contact sheet
+//! - `eval`: a PBNS model over a clip, written as a point cache, measured beside plain LBS
 //! - `view`: the browser page of a bake, or of caches on a model's garment
 //! - `rollout`: a dynamic model played over clips, written and measured against simulations
 //! - `compare`: caches of one clip against perturbed simulations of it
 //! - `train_dynamic`: the dynamic model's two stages trained on simulated clips
+//! - `outputs`: a command's outputs checked before any work, written all or none
 //! - `bench_bake`: the PBNS bake timed by phase beside Blender's glTF export of the same asset
+//! - `bench_rollout`: a dynamic model's roll-out timed beside Blender's cloth on the same frames
 
 pub mod bench_bake;
+pub mod bench_rollout;
 pub mod compare;
+pub mod eval;
+pub mod outputs;
 pub mod preview;
 pub mod rollout;
 pub mod train_dynamic;
@@ -65,10 +71,20 @@ impl Clips {
         &self,
         skeleton: &crate::rig::Skeleton,
     ) -> Result<(&Path, crate::rig::retarget::Retargeted)> {
+        self.load_single_at(skeleton, self.fps)
+    }
+
+    /// [`Clips::load_single`] at the rate `fps` (a model's own rate: see
+    /// [`crate::models::swing::clip_rate`]).
+    pub fn load_single_at(
+        &self,
+        skeleton: &crate::rig::Skeleton,
+        fps: Option<f32>,
+    ) -> Result<(&Path, crate::rig::retarget::Retargeted)> {
         let motion = self.single()?;
         Ok((
             motion,
-            crate::motion::load_clip(motion, &self.reader()?, skeleton, self.fps)?,
+            crate::motion::load_clip(motion, &self.reader()?, skeleton, fps)?,
         ))
     }
 
@@ -76,6 +92,15 @@ impl Clips {
     pub fn single(&self) -> Result<&Path> {
         single_motion(&self.motions)
     }
+}
+
+/// `compute` applied (threads, then the device), then the model file at `path` loaded onto it.
+pub fn load_model(
+    compute: &crate::compute::Compute,
+    path: &Path,
+) -> Result<(crate::models::file::ModelFile, tch::Device)> {
+    let device = compute.apply()?;
+    Ok((crate::models::file::load(path, device)?, device))
 }
 
 /// The one clip of `motions`, for a step that reads exactly one.
