@@ -15,7 +15,15 @@ const H: u32 = 540;
 /// Headless Chromium on `page` with `hash` (the page's URL state), every host unresolvable so a
 /// page that needs the network fails; `--virtual-time-budget` lets the page's scripts finish.
 fn chromium(page: &Path, hash: &str, args: &[&str]) -> std::process::Output {
-    let profile = page.with_extension(format!("chromium-{}", hash.len() + args.len()));
+    // A profile per page and URL state: two Chromiums at once (the VAT test's frames) must not
+    // share one.
+    let key = {
+        use std::hash::{Hash, Hasher};
+        let mut h = std::collections::hash_map::DefaultHasher::new();
+        (hash, args).hash(&mut h);
+        h.finish()
+    };
+    let profile = page.with_extension(format!("chromium-{key:016x}"));
     let url = format!("file://{}#{hash}", page.display());
     run_ok(
         Command::new("chromium")
@@ -138,12 +146,18 @@ fn a_vat_plays_in_the_page_as_the_preview_shows_the_network() {
         garmentbake_ok(&args);
     };
     let page = dir.join("walk.html");
-    eval(
-        &dir.join("walk.vat.exr"),
-        &["--view", page.to_str().unwrap()],
-    );
     let png = dir.join("walk16.vat.png");
-    eval(&png, &[]);
+    // The two evals (their metrics are most of the test's time) side by side, a thread each.
+    std::thread::scope(|scope| {
+        let exr = scope.spawn(|| {
+            eval(
+                &dir.join("walk.vat.exr"),
+                &["--view", page.to_str().unwrap()],
+            )
+        });
+        eval(&png, &[]);
+        exr.join().unwrap();
+    });
     let alone = dir.join("alone.html");
     let report = garmentbake_json(&[
         "view",
@@ -153,7 +167,8 @@ fn a_vat_plays_in_the_page_as_the_preview_shows_the_network() {
         "--json",
     ]);
     assert_eq!(report["garment_vertices"], 2847, "{report}");
-    for frame in [12, 61] {
+    // The two frames side by side, a thread each (their screenshots and previews are apart).
+    let check = |frame: usize| {
         page_matches_preview(&page, &dir, frame, "VAT page");
         // The 16-bit VAT alone against the first page with its body hidden.
         let hash = format!("frame={frame}&view=front&ui=0&body=0");
@@ -162,7 +177,12 @@ fn a_vat_plays_in_the_page_as_the_preview_shows_the_network() {
         let score = iou(&garment_mask(&bare), &garment_mask(&own));
         eprintln!("view walk16.vat.png, frame {frame}: IoU {score:.4} with the eval page's VAT");
         assert!(score >= 0.95, "frame {frame}: IoU {score:.4} < 0.95");
-    }
+    };
+    std::thread::scope(|scope| {
+        let later = scope.spawn(|| check(61));
+        check(12);
+        later.join().unwrap();
+    });
 }
 
 /// The page's garment at `frame` of 131_02 (front view) against `preview` of the network at the
