@@ -63,7 +63,9 @@ pub struct Settings {
     /// Where to draw e(k) and the hem traces (PNG).
     pub horizon_png: Option<PathBuf>,
     pub hem_png: Option<PathBuf>,
-    pub quiet: bool,
+    /// Hide the terminal bar (a command's `--json`): `progress::bar`'s `hide_bar`; silence is
+    /// the global `--quiet` (`progress::set_quiet`), not a setting of the step.
+    pub hide_bar: bool,
 }
 
 /// The hem's swing of one garment sequence.
@@ -328,7 +330,7 @@ fn restarted_horizon(
     name: &str,
 ) -> Result<Vec<f64>> {
     let total = (ensemble.runs().len() * starts.len() * horizon) as u64;
-    let bar = crate::progress::bar(total, &format!("{name} e(k)"), settings.quiet);
+    let bar = crate::progress::bar(total, &format!("{name} e(k)"), settings.hide_bar);
     let mut done = 0u64;
     let curve = ensemble.horizon(starts, horizon, |i, t0| {
         let run = &ensemble.runs()[i];

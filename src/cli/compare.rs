@@ -126,7 +126,7 @@ impl Execute for Args {
                 rollout: self.collision.settings(!self.no_collision_fix)?,
                 horizon_png: self.plot_horizon.clone(),
                 hem_png: self.plot_hem.clone(),
-                quiet: self.output.json,
+                hide_bar: self.output.json,
             },
         };
         run(&request)

@@ -78,9 +78,9 @@ pub fn run(request: &Request, feedback: &Feedback) -> Result<RolloutTimes> {
     let clip = load_clip(&r.motion, &maps, &body.skeleton, Some(fps))?.animation;
     let n = r.frames.max(2).min(clip.frame_count());
     let poses: Vec<_> = (0..n).map(|f| clip.local_pose(f)).collect();
-    let (say, quiet) = (feedback.say, feedback.hide_bars);
+    let (say, hide_bar) = (feedback.say, feedback.hide_bars);
     let roll = |settings: &Settings| -> Result<Timing> {
-        let bar = crate::progress::bar(poses.len() as u64, "roll-out", quiet);
+        let bar = crate::progress::bar(poses.len() as u64, "roll-out", hide_bar);
         let r = for_model(&file, &poses, &Init::Rest, settings.clone(), &mut |f| {
             bar.set_position(f as u64 + 1)
         })?;
@@ -107,7 +107,7 @@ pub fn run(request: &Request, feedback: &Feedback) -> Result<RolloutTimes> {
         blender: simulate::blender::find(None)?,
         threads: r.compute.threads,
     };
-    let bar = crate::progress::bar(0, "simulate", quiet);
+    let bar = crate::progress::bar(0, "simulate", hide_bar);
     let clock = std::time::Instant::now();
     let outcome = simulate::run(&scene, &settings, None, &|done, total| {
         bar.set_length(total as u64);
