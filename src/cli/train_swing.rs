@@ -5,7 +5,7 @@ use super::args::{
 };
 use super::Execute;
 use crate::models::file::SwingEpoch;
-use crate::train::swing::{Inputs, Settings, Trainer};
+use crate::train::swing::{Inputs, Settings, SwingBasis, Trainer};
 use crate::train::{fit_every, CheckpointEvery, FitOptions, Fitted};
 use anyhow::Result;
 use serde::{Deserialize, Serialize};
@@ -59,6 +59,11 @@ pub struct Args {
     /// write them yet; eval to a point cache.
     #[arg(long, default_value_t = Settings::recipe().bones, help_heading = "Training")]
     pub bones: usize,
+    /// Where the swing's blend shapes start: `turns` (a joint's share of the garment turned about
+    /// it, and smooth per-axis fields) or `isometric` (the pinned garment's least-stretching
+    /// smooth motions). Hidden: measured, not adopted (docs/lab/2026-12-06-isometric-swing.md).
+    #[arg(long, value_enum, default_value_t = Settings::recipe().basis, hide = true)]
+    pub basis: SwingBasis,
     /// Hidden width of the swing network.
     #[arg(long, default_value_t = Settings::recipe().width, help_heading = "Training")]
     pub width: usize,
@@ -104,6 +109,7 @@ impl Execute for Args {
             learning_rate: self.lr,
             shapes: self.shapes,
             bones: self.bones,
+            basis: self.basis,
             width: self.width,
             seed: self.seed,
             inertia: self.inertia,

@@ -26,6 +26,18 @@ use std::path::Path;
 use std::time::Instant;
 use tch::{Device, Kind, Tensor};
 
+/// The swing's first blend shapes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SwingBasis {
+    /// Joint turns (a joint's share of the skirt turned about it) and the edge graph's slowest
+    /// Laplacian modes along x, y and z.
+    Turns,
+    /// The garment's least-stretching smooth motions (`isometric_shapes`): the pinned cloth's
+    /// lowest edge-strain modes within its smoothest displacement fields.
+    Isometric,
+}
+
 /// Training settings (the CLI's options).
 #[derive(Clone, Debug)]
 pub struct Settings {
@@ -41,6 +53,8 @@ pub struct Settings {
     /// Swing bones: the joints carrying most of the garment's skin, each turned by the network
     /// (`models::swing::SwingShape::bones`); 0 for blend shapes only.
     pub bones: usize,
+    /// Where the swing's blend shapes start (`SwingBasis`).
+    pub basis: SwingBasis,
     pub lags: Vec<usize>,
     pub fps: f32,
     /// Weight of the inertia term (1: physical; 0 turns the dynamics off, for ablations).
@@ -66,6 +80,7 @@ impl Settings {
             layers: 2,
             shapes: 32,
             bones: 0,
+            basis: SwingBasis::Turns,
             lags: vec![0, 1, 2, 4, 8],
             fps: 30.0,
             // The fabric's own density leaves the sample skirt all but still (docs/swing.md).
@@ -224,12 +239,18 @@ impl Trainer {
         });
         let mut swing = Swing::new(shape.clone(), mean, scale, device);
         let pinned = model.info.garment.pinned.clone();
-        let turns = joint_turns(&model.garment, &network.skin(), &skeleton, settings.shapes);
-        let rest_of = settings.shapes - turns.size()[0] as usize;
-        swing.basis = Tensor::cat(
-            &[turns, vibration_shapes(&model.garment, &pinned, rest_of)],
-            0,
-        )
+        swing.basis = match settings.basis {
+            SwingBasis::Turns => {
+                let turns =
+                    joint_turns(&model.garment, &network.skin(), &skeleton, settings.shapes);
+                let rest_of = settings.shapes - turns.size()[0] as usize;
+                Tensor::cat(
+                    &[turns, vibration_shapes(&model.garment, &pinned, rest_of)],
+                    0,
+                )
+            }
+            SwingBasis::Isometric => isometric_shapes(&model.garment, &pinned, settings.shapes),
+        }
         .to_device(device);
         swing.set_trainable();
         let adam = Adam::new(&swing.parameters());
@@ -594,30 +615,12 @@ fn joint_turns(
 /// zero and E then gets no gradient either.
 fn vibration_shapes(mesh: &crate::geometry::TriMesh, pinned: &[u32], shapes: usize) -> Tensor {
     let n = mesh.vertex_count();
-    let held: std::collections::HashSet<u32> = pinned.iter().copied().collect();
-    let free: Vec<usize> = (0..n).filter(|v| !held.contains(&(*v as u32))).collect();
-    let mut slot = vec![usize::MAX; n];
-    for (i, &v) in free.iter().enumerate() {
-        slot[v] = i;
-    }
-    let m = free.len();
-    let mut lap = vec![0.0f64; m * m];
-    for &[a, b] in &crate::geometry::Topology::new(mesh).edges {
-        let (a, b) = (a as usize, b as usize);
-        for (p, q) in [(a, b), (b, a)] {
-            if slot[p] != usize::MAX {
-                lap[slot[p] * m + slot[p]] += 1.0;
-                if slot[q] != usize::MAX {
-                    lap[slot[p] * m + slot[q]] -= 1.0;
-                }
-            }
-        }
-    }
-    let lap = Tensor::from_slice(&lap).view([m as i64, m as i64]);
-    let (_, vectors) = lap.linalg_eigh("L");
+    let modes = LaplacianModes::new(mesh, pinned);
+    let m = modes.free.len();
     let per_axis = shapes.div_ceil(3);
     let vectors: Vec<f64> = Vec::try_from(
-        vectors
+        modes
+            .vectors
             .narrow(1, 0, per_axis.min(m) as i64)
             .transpose(0, 1)
             .contiguous()
@@ -631,12 +634,138 @@ fn vibration_shapes(mesh: &crate::geometry::TriMesh, pinned: &[u32], shapes: usi
             continue;
         };
         let peak = phi.iter().fold(0.0f64, |a, b| a.max(b.abs())).max(1e-12);
-        for (i, &v) in free.iter().enumerate() {
+        for (i, &v) in modes.free.iter().enumerate() {
             out[k * 3 * n + 3 * v + axis] = (0.01 * phi[i] / peak) as f32;
         }
     }
     Tensor::from_slice(&out).view([shapes as i64, 3 * n as i64])
 }
+
+/// The eigenvectors of the garment's edge-graph Laplacian with the pinned vertices held
+/// (Dirichlet), over the free vertices, smoothest first.
+struct LaplacianModes {
+    free: Vec<usize>,
+    /// `[free, free]` (f64), one eigenvector per column.
+    vectors: Tensor,
+    /// Ascending eigenvalues `[free]`.
+    values: Tensor,
+}
+
+impl LaplacianModes {
+    fn new(mesh: &crate::geometry::TriMesh, pinned: &[u32]) -> LaplacianModes {
+        let n = mesh.vertex_count();
+        let held: std::collections::HashSet<u32> = pinned.iter().copied().collect();
+        let free: Vec<usize> = (0..n).filter(|v| !held.contains(&(*v as u32))).collect();
+        let mut slot = vec![usize::MAX; n];
+        for (i, &v) in free.iter().enumerate() {
+            slot[v] = i;
+        }
+        let m = free.len();
+        let mut lap = vec![0.0f64; m * m];
+        for &[a, b] in &crate::geometry::Topology::new(mesh).edges {
+            let (a, b) = (a as usize, b as usize);
+            for (p, q) in [(a, b), (b, a)] {
+                if slot[p] != usize::MAX {
+                    lap[slot[p] * m + slot[p]] += 1.0;
+                    if slot[q] != usize::MAX {
+                        lap[slot[p] * m + slot[q]] -= 1.0;
+                    }
+                }
+            }
+        }
+        let lap = Tensor::from_slice(&lap).view([m as i64, m as i64]);
+        let (values, vectors) = lap.linalg_eigh("L");
+        LaplacianModes {
+            free,
+            vectors,
+            values,
+        }
+    }
+}
+
+/// Smooth fields the swing draws from: this many of the smoothest Laplacian modes per axis.
+const SMOOTH_MODES: usize = 200;
+
+/// The swing's blend shapes as the garment's least-stretching smooth motions: within the span
+/// of the `SMOOTH_MODES` smoothest Laplacian modes along x, y and z (pins held), the lowest
+/// eigenvectors of `Σ_edges ((d·(u_a − u_b))/L)²` (first-order edge strain; `d` the rest edge's
+/// direction) plus a little of the Laplacian energy, so that among near-isometric motions the
+/// smoother come first. A skirt hanging from its waist swings and flares this way without
+/// stretching to first order, which the per-axis Laplacian modes cannot (a sideways field that
+/// varies down the skirt stretches every vertical edge). Each scaled to 1 cm at most.
+fn isometric_shapes(mesh: &crate::geometry::TriMesh, pinned: &[u32], shapes: usize) -> Tensor {
+    let n = mesh.vertex_count();
+    let modes = LaplacianModes::new(mesh, pinned);
+    let free = &modes.free;
+    let r = SMOOTH_MODES.min(free.len());
+    let phi: Vec<f64> = Vec::try_from(modes.vectors.narrow(1, 0, r as i64).contiguous().view([-1]))
+        .expect("double tensor");
+    let lambda: Vec<f64> =
+        Vec::try_from(modes.values.narrow(0, 0, r as i64)).expect("double tensor");
+    // Row v of phi for every vertex (zero where pinned).
+    let mut row = vec![usize::MAX; n];
+    for (i, &v) in free.iter().enumerate() {
+        row[v] = i;
+    }
+    let at = |v: usize, j: usize| {
+        if row[v] == usize::MAX {
+            0.0
+        } else {
+            phi[row[v] * r + j]
+        }
+    };
+    let edges = crate::geometry::Topology::new(mesh).edges;
+    let p = &mesh.positions;
+    // Strain rows: edge e, coefficient (j, axis) -> d_axis (phi_j(a) - phi_j(b)) / L.
+    let mut strain = vec![0.0f64; edges.len() * 3 * r];
+    let mut mean_length = 0.0f64;
+    for (e, &[a, b]) in edges.iter().enumerate() {
+        let (a, b) = (a as usize, b as usize);
+        let d: [f64; 3] = std::array::from_fn(|k| f64::from(p[a][k] - p[b][k]));
+        let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt().max(1e-9);
+        mean_length += len / edges.len() as f64;
+        for j in 0..r {
+            let g = (at(a, j) - at(b, j)) / len;
+            for k in 0..3 {
+                strain[e * 3 * r + 3 * j + k] = d[k] / len * g;
+            }
+        }
+    }
+    let s = Tensor::from_slice(&strain).view([edges.len() as i64, 3 * r as i64]);
+    let smooth: Vec<f64> = lambda
+        .iter()
+        .flat_map(|l| [*l; 3])
+        .map(|l| SMOOTHNESS * l / (mean_length * mean_length))
+        .collect();
+    let stiffness = s.transpose(0, 1).matmul(&s) + Tensor::from_slice(&smooth).diag(0);
+    let (_, coefficients) = stiffness.linalg_eigh("L");
+    let coefficients: Vec<f64> = Vec::try_from(coefficients.contiguous().view([-1])).expect("f64");
+    let mut out = vec![0.0f32; shapes * 3 * n];
+    for k in 0..shapes.min(3 * r) {
+        let mut field = vec![0.0f64; 3 * n];
+        for (i, &v) in free.iter().enumerate() {
+            for j in 0..r {
+                for axis in 0..3 {
+                    field[3 * v + axis] +=
+                        phi[i * r + j] * coefficients[(3 * j + axis) * 3 * r + k];
+                }
+            }
+        }
+        let peak = field
+            .chunks_exact(3)
+            .map(|u| (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt())
+            .fold(0.0f64, f64::max)
+            .max(1e-12);
+        for (o, f) in out[k * 3 * n..(k + 1) * 3 * n].iter_mut().zip(&field) {
+            *o = (0.01 * f / peak) as f32;
+        }
+    }
+    Tensor::from_slice(&out).view([shapes as i64, 3 * n as i64])
+}
+
+/// Weight of the Laplacian energy beside the edge strain in [`isometric_shapes`] (per squared
+/// mean edge length): small, so it only orders motions that stretch about equally.
+const SMOOTHNESS: f64 = 1e-2;
 
 impl Training for Trainer {
     type Record = EpochLine;
@@ -744,5 +873,65 @@ impl Training for Trainer {
             100.0 * r.collided,
             r.swing_rms_mm
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::test_meshes::grid;
+
+    /// Each shape's largest first-order edge strain `|d·(u_a − u_b)|/L` (rows of `[S, 3N]`).
+    fn first_order_strain(mesh: &crate::geometry::TriMesh, shapes: &Tensor) -> Vec<f64> {
+        let u: Vec<f32> = Vec::try_from(shapes.contiguous().view([-1])).unwrap();
+        let n = mesh.vertex_count();
+        let mut out = Vec::new();
+        for shape in u.chunks_exact(3 * n) {
+            let mut worst = 0.0f64;
+            for &[a, b] in &crate::geometry::Topology::new(mesh).edges {
+                let (a, b) = (a as usize, b as usize);
+                let d: [f32; 3] =
+                    std::array::from_fn(|k| mesh.positions[a][k] - mesh.positions[b][k]);
+                let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                let stretch: f32 = (0..3)
+                    .map(|k| d[k] * (shape[3 * a + k] - shape[3 * b + k]))
+                    .sum();
+                worst = worst.max(f64::from((stretch / (len * len)).abs()));
+            }
+            out.push(worst);
+        }
+        out
+    }
+
+    /// A flat cloth hanging from its top row can move out of its plane without stretching to
+    /// first order: the isometric shapes are mostly those motions and stretch far less than the
+    /// per-axis Laplacian fields (which include in-plane ones).
+    #[test]
+    fn isometric_shapes_do_not_stretch_a_hanging_cloth() {
+        let mesh = grid(8, 8, 0.05);
+        let top: Vec<u32> = (0..9).map(|x| (8 * 9 + x) as u32).collect();
+        let iso = isometric_shapes(&mesh, &top, 6);
+        let laplacian = vibration_shapes(&mesh, &top, 6);
+        assert_eq!(iso.size(), [6, 3 * 81]);
+        let peak = iso
+            .view([6, 81, 3])
+            .square()
+            .sum_dim_intlist(-1, false, Kind::Float)
+            .sqrt()
+            .amax(1, false);
+        let peak: Vec<f32> = Vec::try_from(peak).unwrap();
+        assert!(peak.iter().all(|p| (p - 0.01).abs() < 1e-6), "{peak:?}");
+        let (a, b) = (
+            first_order_strain(&mesh, &iso),
+            first_order_strain(&mesh, &laplacian),
+        );
+        // Measured: five of six exact out-of-plane flexes (~1e-16) and one shear (0.015, cheaper
+        // in stretch plus smoothness than the sixth flex); the Laplacian fields 0 to 0.059.
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+        let flexes = a.iter().filter(|&&s| s < 1e-9).count();
+        assert!(
+            flexes >= 3 && mean(&a) < mean(&b) / 3.0,
+            "isometric {a:?}, laplacian {b:?}"
+        );
     }
 }
