@@ -117,7 +117,7 @@ impl Execute for Args {
         let opts = FitOptions {
             epochs: self.epochs,
             out: &self.out,
-            quiet: self.output.json,
+            hide_bar: self.output.json,
             log: self.log.as_deref(),
         };
         let fitted = fit_every(&mut trainer, &opts, self.checkpoint_every)?;

@@ -517,7 +517,7 @@ impl Request {
         FitOptions {
             epochs: self.epochs,
             out: &self.out,
-            quiet: hide_bar,
+            hide_bar,
             log: self.log.as_deref(),
         }
     }

@@ -78,8 +78,9 @@ impl Blowup {
 pub struct FitOptions<'a> {
     pub epochs: usize,
     pub out: &'a Path,
-    /// Hide the progress bar (machine output).
-    pub quiet: bool,
+    /// Hide the terminal bar (a command's `--json`: machine output); progress still reaches a
+    /// farm log (`progress::bar`). Silence is the global `--quiet` (`progress::set_quiet`).
+    pub hide_bar: bool,
     /// Append one JSON object per epoch to this file (JSON lines).
     pub log: Option<&'a Path>,
 }
@@ -228,7 +229,7 @@ pub fn fit_every<T: Training>(
     let bar = crate::progress::bar(
         opts.epochs.saturating_sub(trainer.epochs_done()) as u64,
         "epochs",
-        opts.quiet,
+        opts.hide_bar,
     );
     let mut wall = WallSplit::default();
     // A resumed run starts from a checkpoint.

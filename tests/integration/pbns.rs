@@ -690,7 +690,7 @@ fn an_interrupted_run_resumed_from_its_checkpoint_ends_with_the_same_tensors() {
         let opts = FitOptions {
             epochs,
             out,
-            quiet: true,
+            hide_bar: true,
             log: None,
         };
         let every = CheckpointEvery {
@@ -1130,7 +1130,7 @@ fn patience_stops_when_the_validation_loss_stalls_and_keeps_the_best_epoch() {
     let opts = FitOptions {
         epochs: 40,
         out: &out,
-        quiet: true,
+        hide_bar: true,
         log: None,
     };
     let fitted = fit_every(&mut t, &opts, CheckpointEvery::EPOCH).unwrap();

@@ -19,6 +19,9 @@ import sys
 import numpy as np
 from alembic3d import Abc, AbcGeom
 
+sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parents[1]))
+from obj_uv import obj_pairs  # noqa: E402
+
 
 def at(schema, s):
     # By the sample's time: the binding takes a plain int for a time in seconds, not an index.
@@ -52,26 +55,6 @@ def read_pc2(path):
     points, _start, _rate, samples = struct.unpack_from("<iffi", data, 16)
     frames = np.frombuffer(data, dtype="<f4", count=samples * points * 3, offset=32)
     return frames.reshape(samples, points, 3)
-
-
-def obj_pairs(path):
-    """The OBJ's (vertex, UV) corner pairs, 0-based, as a map vertex -> its distinct UVs."""
-    vt, pairs = [], {}
-    with open(path) as fh:
-        for line in fh:
-            w = line.split()
-            if not w:
-                continue
-            if w[0] == "vt":
-                vt.append((float(w[1]), float(w[2])))
-            elif w[0] == "f":
-                for corner in w[1:]:
-                    parts = corner.split("/")
-                    v, t = int(parts[0]) - 1, int(parts[1]) - 1
-                    uvs = pairs.setdefault(v, [])
-                    if vt[t] not in uvs:
-                        uvs.append(vt[t])
-    return pairs
 
 
 def compare_uvs(corners, obj):

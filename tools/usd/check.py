@@ -33,6 +33,9 @@ import sys
 import numpy as np
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, UsdValidation
 
+sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parents[1]))
+from obj_uv import obj_pairs  # noqa: E402
+
 
 def validate(path):
     stage = Usd.Stage.Open(path)
@@ -226,13 +229,20 @@ def replay(path, mesh, clip, method, reference, stride):
     return 0
 
 
-def points(path, mesh_name, reference):
+def _mesh_prim(path, mesh_name):
+    """PATH's stage and the mesh prim MESH_NAME under its default prim (or the default prim
+    itself); the caller keeps the stage, or the prim dies with it."""
     stage = Usd.Stage.Open(path)
     prim = stage.GetDefaultPrim()
     if mesh_name:
         prim = stage.GetPrimAtPath(prim.GetPath().AppendChild(mesh_name))
     if not prim or not prim.IsA(UsdGeom.Mesh):
         raise SystemExit("no mesh %s in %s" % (mesh_name or "as the default prim", path))
+    return stage, prim
+
+
+def points(path, mesh_name, reference):
+    stage, prim = _mesh_prim(path, mesh_name)
     mesh = UsdGeom.Mesh(prim)
     attr = mesh.GetPointsAttr()
     times = attr.GetTimeSamples()
@@ -250,33 +260,8 @@ def points(path, mesh_name, reference):
     return 0
 
 
-def _obj_pairs(path):
-    """The OBJ's (vertex, UV) corner pairs, 0-based, as a map vertex -> its distinct UVs."""
-    vt, pairs = [], {}
-    with open(path) as fh:
-        for line in fh:
-            w = line.split()
-            if not w:
-                continue
-            if w[0] == "vt":
-                vt.append((float(w[1]), float(w[2])))
-            elif w[0] == "f":
-                for corner in w[1:]:
-                    parts = corner.split("/")
-                    v, t = int(parts[0]) - 1, int(parts[1]) - 1
-                    uvs = pairs.setdefault(v, [])
-                    if vt[t] not in uvs:
-                        uvs.append(vt[t])
-    return pairs
-
-
 def uvs(path, mesh_name, obj):
-    stage = Usd.Stage.Open(path)
-    prim = stage.GetDefaultPrim()
-    if mesh_name:
-        prim = stage.GetPrimAtPath(prim.GetPath().AppendChild(mesh_name))
-    if not prim or not prim.IsA(UsdGeom.Mesh):
-        raise SystemExit("no mesh %s in %s" % (mesh_name or "as the default prim", path))
+    stage, prim = _mesh_prim(path, mesh_name)
     st = UsdGeom.PrimvarsAPI(prim).GetPrimvar("st")
     if not st:
         print(json.dumps({"file": path, "st": None}))
@@ -288,7 +273,7 @@ def uvs(path, mesh_name, obj):
         corners = [(faces[i], (flat[i][0], flat[i][1])) for i in range(len(faces))]
     else:
         corners = [(v, (flat[v][0], flat[v][1])) for v in faces]
-    pairs = _obj_pairs(obj)
+    pairs = obj_pairs(obj)
     worst, unmatched, covered = 0.0, 0, set()
     for v, uv in corners:
         options = pairs.get(v, [])
