@@ -15,7 +15,7 @@
 use anyhow::{bail, Context, Result};
 use garmentbake::models::dynamic::motion::body_drive;
 use garmentbake::models::dynamic::settle::PoseRegression;
-use garmentbake::models::dynamic::{Dynamic, MotionShape, Seeds};
+use garmentbake::models::dynamic::{BodyAnchors, Dynamic, MotionShape};
 use garmentbake::models::file::{self, ModelFile};
 use garmentbake::train::dynamic::{FrameData, Reconstruction, Sequence};
 use garmentbake::train::motion::{drive_joints, history_indices};
@@ -40,13 +40,13 @@ fn main() -> Result<()> {
     let file = file::load(Path::new(model), Device::Cpu)?;
     let dynamic = file.dynamic()?;
     let info = file.info.dynamic()?;
-    let seeds = Seeds::from_vertices(&file.body, &info.seeds, &info.seed_parts)?;
+    let anchors = BodyAnchors::from_vertices(&file.body, &info.anchors, &info.anchor_parts)?;
     let mut shape = MotionShape::for_space(&info.shape.encoder, 1);
     shape.drive_joints = drive_joints(&file);
     let data = |pairs: &[(String, String)]| -> Result<FrameData> {
         Ok(FrameData::new(
             &file.body,
-            &seeds,
+            &anchors,
             &sequences(&file, pairs, info.fps)?,
             Device::Cpu,
         ))

@@ -2,7 +2,7 @@
 //! line between the latents of two frames. A smooth space gives plausible garments all the way
 //! (no blow-up, nothing through the body); a space that only memorised its frames does not.
 
-use crate::models::dynamic::{BodyFrames, Seeds};
+use crate::models::dynamic::{BodyAnchors, BodyFrames};
 use crate::models::file::ModelFile;
 use crate::rig::JointTransform;
 use anyhow::{bail, Result};
@@ -16,7 +16,7 @@ pub struct LatentPath {
 }
 
 /// Clip frame `a + k` decodes `(1 − t)·z_a + t·z_b` with `t = k / (b − a)`, skinned by that
-/// frame's seeds: the body keeps moving while the garment's latent goes in a straight line from
+/// frame's anchors: the body keeps moving while the garment's latent goes in a straight line from
 /// the encoding of the simulated garment at frame `a` to that of frame `b`. `sim` may hold
 /// fewer frames than `poses` (a simulation of the clip's first frames); both ends must be in it.
 pub fn between(
@@ -32,9 +32,9 @@ pub fn between(
     let (garment_a, garment_b) = (&sim[a], &sim[b]);
     let space = &file.dynamic()?.space;
     let info = file.info.dynamic()?;
-    let seeds = Seeds::from_vertices(&file.body, &info.seeds, &info.seed_parts)?;
+    let anchors = BodyAnchors::from_vertices(&file.body, &info.anchors, &info.anchor_parts)?;
     let device = space.consts.rest.device();
-    let bodies = BodyFrames::new(&file.body, &seeds, &poses[a..=b], device);
+    let bodies = BodyFrames::new(&file.body, &anchors, &poses[a..=b], device);
     let ends = Tensor::from_slice(&[0i64, (b - a) as i64]).to_device(device);
     let at_ends = bodies.select(&ends);
     let flat: Vec<f32> = garment_a
@@ -47,7 +47,7 @@ pub fn between(
         .reshape([2, -1, 3])
         .to_device(device);
     let (garments, z) = tch::no_grad(|| {
-        let z = space.encode(&g, &at_ends.seeds, &at_ends.transforms);
+        let z = space.encode(&g, &at_ends.anchors, &at_ends.transforms);
         let t = Tensor::linspace(0.0, 1.0, (b - a + 1) as i64, (Kind::Float, device)).unsqueeze(1);
         let path = z.get(0).unsqueeze(0) * (1.0 - &t) + z.get(1).unsqueeze(0) * &t;
         let garments = space.skin(&space.canonical(&path), &bodies.transforms);

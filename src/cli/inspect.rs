@@ -163,7 +163,7 @@ fn model_report(path: &Path, full: bool) -> Result<Value> {
                 json!({
                     "kind": info.model.kind(),
                     "stages": d.training.stages,
-                    "space": format!("{}² UV map, {} seeds → latent {} → ξ {} ch → R {} × {}", d.shape.map, d.shape.seeds, d.shape.latent, d.shape.xi, d.shape.mlp_layers, d.shape.mlp),
+                    "space": format!("{}² UV map, {} seeds → latent {} → ξ {} ch → R {} × {}", d.shape.map, d.shape.anchors, d.shape.latent, d.shape.xi, d.shape.mlp_layers, d.shape.mlp),
                     "preset": d.shape.preset,
                     "fps": d.fps,
                     "kernel_radius_mm": d.parts.iter().zip(&d.radii).map(|(p, r)| format!("{p} {:.1}", r * 1e3)).collect::<Vec<_>>(),

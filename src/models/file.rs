@@ -18,7 +18,9 @@
 
 use super::coverage::Coverage;
 use super::dynamic::space::Consts;
-use super::dynamic::{Dynamic, MotionEncoder, MotionShape, Seeds, Space, SpaceShape, UvRaster};
+use super::dynamic::{
+    BodyAnchors, Dynamic, MotionEncoder, MotionShape, Space, SpaceShape, UvRaster,
+};
 use super::pbns::{flat, Pbns, PbnsShape};
 use super::swing::{Swing, SwingShape};
 use super::{Model, ModelKind};
@@ -86,7 +88,7 @@ impl WrittenBy {
 #[allow(clippy::large_enum_variant)]
 pub enum KindInfo {
     Pbns(PbnsInfo),
-    /// Boxed: its seeds, ranges and two histories make it far larger than PBNS's description.
+    /// Boxed: its anchors, ranges and two histories make it far larger than PBNS's description.
     Dynamic(Box<DynamicInfo>),
 }
 
@@ -99,13 +101,16 @@ impl KindInfo {
     }
 }
 
-/// A dynamic model's sizes, seeds, training and history (stage 1: the generative space).
+/// A dynamic model's sizes, anchors, training and history (stage 1: the generative space).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct DynamicInfo {
     pub shape: SpaceShape,
-    /// Body vertices used as seed points, and each one's part (index into `parts`).
-    pub seeds: Vec<u32>,
-    pub seed_parts: Vec<usize>,
+    /// Body vertices used as anchor points, and each one's part (index into `parts`).
+    /// (Keys `seeds` and `seed_parts` in the model file.)
+    #[serde(rename = "seeds")]
+    pub anchors: Vec<u32>,
+    #[serde(rename = "seed_parts")]
+    pub anchor_parts: Vec<usize>,
     pub parts: Vec<String>,
     /// Learnt kernel radius per part (metres), for reading; the tensor is authoritative.
     pub radii: Vec<f64>,
@@ -785,13 +790,13 @@ fn is_pbns_tensor(name: &str) -> bool {
         || name.starts_with("swing.")
 }
 
-/// The generative space from its tensors: the network rebuilt from the description (seeds,
+/// The generative space from its tensors: the network rebuilt from the description (anchors,
 /// UV layout), then its parameters loaded.
 fn load_space(t: &Tensors, info: &DynamicInfo, garment: &TriMesh, body: &Body) -> Result<Space> {
-    let seeds = Seeds::from_vertices(body, &info.seeds, &info.seed_parts)
+    let anchors = BodyAnchors::from_vertices(body, &info.anchors, &info.anchor_parts)
         .map_err(|e| t.fail(e.to_string()))?;
     let raster = UvRaster::new(garment, info.shape.map, &t.path.display().to_string())?;
-    let consts = Consts::new(garment, &raster, &seeds, t.device);
+    let consts = Consts::new(garment, &raster, &anchors, t.device);
     let mut space = Space::new(info.shape.clone(), consts, t.device)?;
     let stored: Vec<(String, Tensor)> =
         t.st.names()

@@ -9,7 +9,7 @@ use crate::compute::Compute;
 use crate::garment::Garment;
 use crate::io::gltf_body::read_body;
 use crate::models::dynamic::SpaceShape;
-use crate::models::dynamic::{MotionShape, Seeds};
+use crate::models::dynamic::{BodyAnchors, MotionShape};
 use crate::models::file::{DynamicEpoch, ModelFile, MotionEpoch, RolloutRound, Settled};
 use crate::motion::read_maps;
 use crate::rig::Skeleton;
@@ -323,7 +323,7 @@ impl Request {
             );
         }
         let eval = self.eval_sequence(&file.body.skeleton, n)?;
-        let data = FrameData::new(&file.body, &self.seeds(&file)?, &train, device);
+        let data = FrameData::new(&file.body, &self.anchors(&file)?, &train, device);
         let frames = data.len();
         say(&format!(
             "{frames} training frames from {} clip(s); the space stays frozen",
@@ -536,15 +536,15 @@ impl Request {
         })
     }
 
-    fn seeds(&self, file: &ModelFile) -> Result<Seeds> {
+    fn anchors(&self, file: &ModelFile) -> Result<BodyAnchors> {
         let info = file.info.dynamic()?;
-        Seeds::from_vertices(&file.body, &info.seeds, &info.seed_parts)
+        BodyAnchors::from_vertices(&file.body, &info.anchors, &info.anchor_parts)
     }
 
     fn frame_data(&self, file: &ModelFile, s: &Sequence, device: tch::Device) -> Result<FrameData> {
         Ok(FrameData::new(
             &file.body,
-            &self.seeds(file)?,
+            &self.anchors(file)?,
             std::slice::from_ref(s),
             device,
         ))

@@ -15,7 +15,7 @@ pub mod timing;
 use crate::body::Body;
 use crate::geometry::StrainLimit;
 use crate::models::dynamic::motion::History;
-use crate::models::dynamic::{BodyFrames, Dynamic, MeshEdges, MeshLaplacian, Seeds};
+use crate::models::dynamic::{BodyAnchors, BodyFrames, Dynamic, MeshEdges, MeshLaplacian};
 use crate::models::file::ModelFile;
 use crate::rig::JointTransform;
 use anyhow::{bail, Result};
@@ -106,7 +106,7 @@ impl Default for Settings {
 
 /// Where the roll-out starts.
 pub enum Init {
-    /// The rest garment carried to the first pose by the seeds, at rest (zero velocity).
+    /// The rest garment carried to the first pose by the anchors, at rest (zero velocity).
     Rest,
     /// A garment's last frames, oldest first, the last one as frame 0 (the model reads up to
     /// three: velocity and acceleration come from them). One frame: that garment at rest (e.g.
@@ -165,7 +165,7 @@ pub struct GarmentShape<'a> {
 pub fn roll_out(
     model: &Dynamic,
     body: &Body,
-    seeds: &Seeds,
+    anchors: &BodyAnchors,
     garment: &GarmentShape,
     poses: &[Vec<JointTransform>],
     fps: f64,
@@ -180,7 +180,7 @@ pub fn roll_out(
     if poses.is_empty() {
         bail!("nothing to roll out: the clip has no frames");
     }
-    let bodies = BodyFrames::new(body, seeds, poses, device);
+    let bodies = BodyFrames::new(body, anchors, poses, device);
     let drives = model.clip_drives(&bodies, fps)?;
     let at = |f: usize| bodies.select(&Tensor::from_slice(&[f as i64]).to_device(device));
     let start: Vec<Vec<[f32; 3]>> = match init {
@@ -286,7 +286,7 @@ pub fn roll_out(
     Ok(out)
 }
 
-/// [`roll_out`] of a model file's dynamic model over `poses` at the model's rate, with its seeds
+/// [`roll_out`] of a model file's dynamic model over `poses` at the model's rate, with its anchors
 /// and, unless `settings` says otherwise, its latents held in the training range.
 pub fn for_model(
     file: &ModelFile,
@@ -303,7 +303,7 @@ pub fn for_model(
             .as_ref()
             .map(|m| (m.latent_min.clone(), m.latent_max.clone()));
     }
-    let seeds = Seeds::from_vertices(&file.body, &info.seeds, &info.seed_parts)?;
+    let anchors = BodyAnchors::from_vertices(&file.body, &info.anchors, &info.anchor_parts)?;
     let garment = GarmentShape {
         rest: &file.garment.positions,
         triangles: &file.garment.triangles,
@@ -312,7 +312,7 @@ pub fn for_model(
     roll_out(
         model,
         &file.body,
-        &seeds,
+        &anchors,
         &garment,
         poses,
         info.fps as f64,

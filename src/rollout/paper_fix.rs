@@ -21,7 +21,7 @@ pub struct ShapeTerms {
 
 /// The decoded frame the fix starts from.
 pub struct Decoded<'a> {
-    /// The canonical (unskinned) garment `Θ` offsets, and the pose's seed transforms.
+    /// The canonical (unskinned) garment `Θ` offsets, and the pose's anchor transforms.
     pub canonical: &'a Tensor,
     pub transforms: &'a Tensor,
     /// The skinned decode itself.
@@ -50,7 +50,7 @@ pub fn resolve(
     // Weight 0 is the paper's objective: the edge term is then left out, not computed at zero.
     let target_lengths =
         (s.edge_weight > 0.0).then(|| tch::no_grad(|| shape.edges.lengths(garment)));
-    // The pose is fixed over the iterations: blend the seeds' transforms once.
+    // The pose is fixed over the iterations: blend the anchors' transforms once.
     let blended = tch::no_grad(|| space.blended(decoded.transforms));
     // Skinning is affine in the canonical garment, so `Θ`'s displacement adds to any garment.
     let resolved = |theta: &Tensor| {

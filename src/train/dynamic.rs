@@ -15,7 +15,8 @@ use crate::geometry::sdf_grid::SdfGrid;
 use crate::geometry::{SurfaceIndex, TriMesh};
 use crate::models::dynamic::space::Consts;
 use crate::models::dynamic::{
-    seeds::PARTS, BodyFrames, Dynamic, MeshEdges, MeshLaplacian, Seeds, Space, SpaceShape, UvRaster,
+    anchors::PARTS, BodyAnchors, BodyFrames, Dynamic, MeshEdges, MeshLaplacian, Space, SpaceShape,
+    UvRaster,
 };
 use crate::models::file::{
     self, BodyInfo, DynamicEpoch, DynamicInfo, DynamicTraining, GarmentInfo, KindInfo, ModelFile,
@@ -82,9 +83,9 @@ pub struct Settings {
     pub learning_rate: f64,
     pub seed: u64,
     pub device: Device,
-    /// Seeds are sampled on the body within this distance of the garment at rest (metres).
-    pub seed_reach: f32,
-    /// Initial kernel radius of the seed skinning, every part (metres).
+    /// Anchors are sampled on the body within this distance of the garment at rest (metres).
+    pub anchor_reach: f32,
+    /// Initial kernel radius of the anchor skinning, every part (metres).
     pub kernel_radius: f64,
     /// Random latents decoded per step for `L_rand` and `L_SDF`.
     pub random: usize,
@@ -109,7 +110,7 @@ impl Settings {
             learning_rate: 3e-4,
             seed: 0,
             device: Device::Cpu,
-            seed_reach: 0.25,
+            anchor_reach: 0.25,
             kernel_radius: crate::models::dynamic::space::RADIUS0,
             random: 2,
             sdf_margin: 0.003,
@@ -126,14 +127,19 @@ pub struct FrameData {
 }
 
 impl FrameData {
-    pub fn new(body: &Body, seeds: &Seeds, sequences: &[Sequence], device: Device) -> FrameData {
+    pub fn new(
+        body: &Body,
+        anchors: &BodyAnchors,
+        sequences: &[Sequence],
+        device: Device,
+    ) -> FrameData {
         let (mut g, mut parts, mut clip_starts) = (Vec::new(), Vec::new(), Vec::new());
         let mut frames = 0;
         for s in sequences {
             clip_starts.push(frames);
             frames += s.garment.len();
             g.extend(s.garment.iter().flatten().flatten().copied());
-            parts.push(BodyFrames::new(body, seeds, &s.poses(), device));
+            parts.push(BodyFrames::new(body, anchors, &s.poses(), device));
         }
         FrameData {
             garment: Tensor::from_slice(&g)
@@ -164,7 +170,7 @@ impl FrameData {
     pub fn batch(&self, idx: &Tensor) -> (Tensor, Tensor, Tensor) {
         (
             self.garment.index_select(0, idx),
-            self.body.seeds.index_select(0, idx),
+            self.body.anchors.index_select(0, idx),
             self.body.transforms.index_select(0, idx),
         )
     }
@@ -311,16 +317,16 @@ impl SpaceTrainer {
         tch::manual_seed(settings.seed as i64);
         let device = settings.device;
         let raster = UvRaster::new(&garment.mesh, settings.shape.map, &garment.name)?;
-        let seeds = Seeds::sample(
+        let anchors = BodyAnchors::sample(
             &body,
             &garment.mesh.positions,
-            settings.shape.seeds,
-            settings.seed_reach,
+            settings.shape.anchors,
+            settings.anchor_reach,
         )?;
-        let consts = Consts::new(&garment.mesh, &raster, &seeds, device);
+        let consts = Consts::new(&garment.mesh, &raster, &anchors, device);
         let mut space = Space::new(settings.shape.clone(), consts, device)?;
         space.set_radius(settings.kernel_radius)?;
-        let data = FrameData::new(&body, &seeds, sequences, device);
+        let data = FrameData::new(&body, &anchors, sequences, device);
         space.init_linear(&tch::no_grad(|| {
             crate::models::predict_chunks(data.len(), |s, n| {
                 let (g, _, m) = data.batch(&data.range(s, n));
@@ -358,8 +364,8 @@ impl SpaceTrainer {
             fabric,
             model: KindInfo::Dynamic(Box::new(DynamicInfo {
                 shape: settings.shape.clone(),
-                seeds: seeds.vertices.clone(),
-                seed_parts: seeds.parts.clone(),
+                anchors: anchors.vertices.clone(),
+                anchor_parts: anchors.parts.clone(),
                 parts: PARTS.iter().map(|p| p.to_string()).collect(),
                 radii: space.radii(),
                 fps: sequences[0].clip.fps,
@@ -599,7 +605,7 @@ impl Training for SpaceTrainer {
         let theirs = checkpoint.info.dynamic()?;
         let mine = self.info();
         if theirs.shape != mine.shape
-            || theirs.seeds != mine.seeds
+            || theirs.anchors != mine.anchors
             || theirs.training.seed != mine.training.seed
             || checkpoint.info.garment.rest_hash != self.file.info.garment.rest_hash
             || theirs.training.motions != mine.training.motions

@@ -1,8 +1,8 @@
-//! What the dynamic model needs of the posed body at each frame, as tensors: the seeds'
+//! What the dynamic model needs of the posed body at each frame, as tensors: the anchors'
 //! positions, transforms and normals, the root joint's rotation and position, and every joint's
 //! local rotation (the motion stage's body drive).
 
-use super::seeds::Seeds;
+use super::anchors::BodyAnchors;
 use crate::body::Body;
 use crate::models::pose_features::{pose_features, PER_JOINT};
 use crate::rig::JointTransform;
@@ -11,7 +11,7 @@ use tch::{Device, Tensor};
 /// Per-frame body quantities `[F, ...]`.
 pub struct BodyFrames {
     /// Seed positions `[F, N, 3]`.
-    pub seeds: Tensor,
+    pub anchors: Tensor,
     /// Seed LBS transforms, row-major 3×4, `[F, N, 12]`.
     pub transforms: Tensor,
     /// Seed normals (the rest normal turned by the transform) `[F, N, 3]`.
@@ -27,7 +27,7 @@ pub struct BodyFrames {
 impl BodyFrames {
     pub fn new(
         body: &Body,
-        seeds: &Seeds,
+        anchors: &BodyAnchors,
         poses: &[Vec<JointTransform>],
         device: Device,
     ) -> BodyFrames {
@@ -36,8 +36,8 @@ impl BodyFrames {
         let joints: Vec<usize> = (0..body.skeleton.joint_count()).collect();
         for pose in poses {
             let skinning = body.skeleton.skinning_matrices(pose);
-            for (j, t) in seeds.transforms(body, &skinning).iter().enumerate() {
-                let (p, normal) = (seeds.rest[j], body.normals[seeds.vertices[j] as usize]);
+            for (j, t) in anchors.transforms(body, &skinning).iter().enumerate() {
+                let (p, normal) = (anchors.rest[j], body.normals[anchors.vertices[j] as usize]);
                 let row = |k: usize, x: [f32; 3], w: f32| {
                     t[4 * k] * x[0] + t[4 * k + 1] * x[1] + t[4 * k + 2] * x[2] + t[4 * k + 3] * w
                 };
@@ -55,10 +55,10 @@ impl BodyFrames {
             rotations.extend(pose_features(&joints, &local));
         }
         let j = joints.len() as i64;
-        let (f, s) = (poses.len() as i64, seeds.rest.len() as i64);
+        let (f, s) = (poses.len() as i64, anchors.rest.len() as i64);
         let t = |v: Vec<f32>, d: &[i64]| Tensor::from_slice(&v).reshape(d).to_device(device);
         BodyFrames {
-            seeds: t(b, &[f, s, 3]),
+            anchors: t(b, &[f, s, 3]),
             transforms: t(m, &[f, s, 12]),
             normals: t(n, &[f, s, 3]),
             root: t(r, &[f, 3, 3]),
@@ -70,7 +70,7 @@ impl BodyFrames {
     /// Frames `idx` `[B]`.
     pub fn select(&self, idx: &Tensor) -> BodyFrames {
         BodyFrames {
-            seeds: self.seeds.index_select(0, idx),
+            anchors: self.anchors.index_select(0, idx),
             transforms: self.transforms.index_select(0, idx),
             normals: self.normals.index_select(0, idx),
             root: self.root.index_select(0, idx),
@@ -85,7 +85,7 @@ impl BodyFrames {
             Tensor::cat(&parts.iter().map(f).collect::<Vec<_>>(), 0)
         };
         BodyFrames {
-            seeds: all(|p| &p.seeds),
+            anchors: all(|p| &p.anchors),
             transforms: all(|p| &p.transforms),
             normals: all(|p| &p.normals),
             root: all(|p| &p.root),

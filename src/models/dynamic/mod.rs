@@ -1,22 +1,22 @@
 //! The motion-guided dynamic garment model (Zhang et al., "Motion Guided Deep Dynamic 3D
 //! Garments"). Stage 1, the generative space of garment deformations: a garment frame, measured
-//! relative to body seed points and laid out in its UV map, is encoded to a latent `Z`; the
+//! relative to body anchor points and laid out in its UV map, is encoded to a latent `Z`; the
 //! decoder gives per-vertex displacements in each vertex's rest frame and the garment is skinned
-//! by the seeds with distance-based weights whose kernel radius is learnt per body part.
+//! by the anchors with distance-based weights whose kernel radius is learnt per body part.
 //! Stage 2, the dynamic-aware encoder: the previous garment state and the body's motion give the
 //! next frame's latent, rolled out frame after frame.
 
+pub mod anchors;
 pub mod frames;
 pub mod learned;
 pub mod motion;
-pub mod seeds;
 pub mod settle;
 pub mod space;
 pub mod uv;
 
+pub use anchors::BodyAnchors;
 pub use frames::BodyFrames;
 pub use motion::{MotionEncoder, MotionShape};
-pub use seeds::Seeds;
 pub use space::{Space, SpaceShape};
 pub use uv::UvRaster;
 

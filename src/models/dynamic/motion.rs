@@ -7,10 +7,10 @@
 //! - `E_dyn` is residual: `Z_t = E_sta(g_{t−1}) + ΔE(S(M^P_{t−1}), E_t)`, the frozen static
 //!   encoder (with its linear path) of the previous garment plus a learnt change whose last layer
 //!   starts at zero. The untrained model holds the previous frame's canonical shape and lets the
-//!   seeds carry it: the virtual sample `E_t = 0` then starts at its target, and the loss keeps it
+//!   anchors carry it: the virtual sample `E_t = 0` then starts at its target, and the loss keeps it
 //!   there.
 //! - One more per-vertex input: where each previous garment vertex would go if it followed the
-//!   body rigidly from `t − 1` to `t` (the seeds' blended transforms, undone at `t − 1`, applied at
+//!   body rigidly from `t − 1` to `t` (the anchors' blended transforms, undone at `t − 1`, applied at
 //!   `t`). It is the body's motion as the garment feels it; without it `E_t` sees the body only
 //!   through contacts, and a skirt's swing is driven by the hips it does not touch at the hem.
 //! - Vectors are expressed in the root joint's frame at `t` (turning in place is not a new motion).
@@ -160,7 +160,7 @@ pub struct MotionInputs {
     /// Per-vertex motion channels `[B, V, 9]` in the root frame at `t`.
     pub motion: Tensor,
     /// The interaction forces `a_ij · ReLU(−q_ij) · n_j` factored: their sizes
-    /// `a_ij · ReLU(−q_ij)` `[B, V, N]` and the seeds' normals `n_j` `[B, N, 3]` in the root
+    /// `a_ij · ReLU(−q_ij)` `[B, V, N]` and the anchors' normals `n_j` `[B, N, 3]` in the root
     /// frame at `t` (the `[B, V, N, 3]` product is never built: `C`'s first layer is linear in it).
     pub contact: Tensor,
     pub contact_normals: Tensor,
@@ -215,14 +215,14 @@ impl StaticInputs {
     }
 
     /// The three garments to encode (`g_{t−1}` against the body at `t − 1`; the ballistic
-    /// guess and `g_{t−1}` against the body at `t`) as one batch: garments, seeds, transforms.
+    /// guess and `g_{t−1}` against the body at `t`) as one batch: garments, anchors, transforms.
     fn stacked(h: &History) -> (Tensor, Tensor, Tensor) {
         let [g1, g2, _] = &h.garment;
         let ballistic = g1 * 2.0 - g2;
         let (before, now) = (&h.before, &h.now);
         (
             Tensor::cat(&[g1, &ballistic, g1], 0),
-            Tensor::cat(&[&before.seeds, &now.seeds, &now.seeds], 0),
+            Tensor::cat(&[&before.anchors, &now.anchors, &now.anchors], 0),
             Tensor::cat(&[&before.transforms, &now.transforms, &now.transforms], 0),
         )
     }
@@ -278,16 +278,16 @@ pub fn motion_inputs(
 }
 
 /// `a_ij · ReLU(−q_ij)` `[B, V, N]` with `q_ij = (g_{t−1,i} − b_{t,j}) · n_{t,j}` (previous
-/// garment against the current seeds' tangent planes) and `a_ij = exp(−|g_{t−1,i} − b_{t−1,j}|²
-/// / 2σ²)` (only seeds that were near the vertex push it): the size of the force along `n_j`.
+/// garment against the current anchors' tangent planes) and `a_ij = exp(−|g_{t−1,i} − b_{t−1,j}|²
+/// / 2σ²)` (only anchors that were near the vertex push it): the size of the force along `n_j`.
 /// Dot products as matrix products, so that no `[B, V, N, 3]` tensor is built.
 fn contact_sizes(g1: &Tensor, h: &History, sigma: f32) -> Tensor {
-    let (seeds_now, normals) = (&h.now.seeds, &h.now.normals);
-    let plane = (seeds_now * normals)
+    let (anchors_now, normals) = (&h.now.anchors, &h.now.normals);
+    let plane = (anchors_now * normals)
         .sum_dim_intlist(2, false, Kind::Float)
         .unsqueeze(1);
     let q = g1.bmm(&normals.transpose(1, 2)) - plane;
-    let before = &h.before.seeds;
+    let before = &h.before.anchors;
     let square = |x: &Tensor| x.square().sum_dim_intlist(2, false, Kind::Float);
     let near = (square(g1).unsqueeze(2) + square(before).unsqueeze(1)
         - g1.bmm(&before.transpose(1, 2)) * 2.0)
@@ -321,7 +321,7 @@ impl MotionEncoder {
         let vs = nn::VarStore::new(device);
         let root = vs.root() / "motion";
         let f = shape.features as i64;
-        let n = space.shape.seeds as i64;
+        let n = space.shape.anchors as i64;
         let fan_in = (MOTION_CHANNELS + 3 * n + 1) as f64;
         let bound = 1.0 / fan_in.sqrt();
         let uniform = nn::Init::Uniform {
@@ -596,7 +596,7 @@ mod tests {
 
     fn frames(bs: i64, n: i64) -> BodyFrames {
         BodyFrames {
-            seeds: random(&[bs, n, 3]),
+            anchors: random(&[bs, n, 3]),
             transforms: random(&[bs, n, 12]),
             normals: random(&[bs, n, 3]),
             root: random(&[bs, 3, 3]),
@@ -627,9 +627,9 @@ mod tests {
         let x = motion_inputs(&space, &h, &shape, None);
         // The paper's forces, built in full: a_ij · ReLU(−q_ij) · n_j, in the root frame.
         let g1 = &h.garment[0];
-        let q = ((g1.unsqueeze(2) - h.now.seeds.unsqueeze(1)) * h.now.normals.unsqueeze(1))
+        let q = ((g1.unsqueeze(2) - h.now.anchors.unsqueeze(1)) * h.now.normals.unsqueeze(1))
             .sum_dim_intlist(3, false, Kind::Float);
-        let a = ((g1.unsqueeze(2) - h.before.seeds.unsqueeze(1))
+        let a = ((g1.unsqueeze(2) - h.before.anchors.unsqueeze(1))
             .square()
             .sum_dim_intlist(3, false, Kind::Float)
             / (-2.0 * (sigma as f64).powi(2)))
@@ -653,7 +653,7 @@ mod tests {
         );
         let factored = x.contact.bmm(&per_seed);
         let scale = dense.abs().max().double_value(&[]);
-        assert!(scale > 1e-3, "the test's garment must touch the seeds");
+        assert!(scale > 1e-3, "the test's garment must touch the anchors");
         let error = (dense - factored).abs().max().double_value(&[]);
         assert!(
             error < 1e-5 * scale,

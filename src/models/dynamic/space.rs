@@ -1,6 +1,6 @@
 //! The generative space: `S` (convolutions over the descriptor map) → `E_sta` → `Z` → `D` →
 //! feature map `ξ` → per-vertex MLP `R(ξ_i, u_i)` → displacement `d_i` in the vertex's rest frame
-//! `H0_i` → `ĝ_i = g0_i + H0_i d_i` → skinned by the seeds:
+//! `H0_i` → `ĝ_i = g0_i + H0_i d_i` → skinned by the anchors:
 //! `g_i = Σ_j w_ij M_j ĝ_i`, `w_ij = softmax_j(−|g0_i − b0_j|² / 2ρ²_part(j))`.
 //! Deviations from the paper, each for trainability on a laptop in minutes rather than 350 GPU
 //! epochs: the kernel weights are taken at the rest garment `g0` (not at `ĝ`), so skinning can be
@@ -10,7 +10,7 @@
 //! No instance norm (the 2×2 and 4×4 maps of the bottleneck have too few texels for per-map
 //! statistics); LeakyReLU(0.2) everywhere.
 
-use super::seeds::{Seeds, PARTS};
+use super::anchors::{BodyAnchors, PARTS};
 use super::uv::UvRaster;
 use crate::geometry::{v3, vertex_normals, TriMesh};
 use anyhow::{bail, Result};
@@ -24,7 +24,9 @@ pub struct SpaceShape {
     pub preset: String,
     /// The UV map is `map`×`map` texels (a power of two ≥ 8).
     pub map: usize,
-    pub seeds: usize,
+    /// Body anchors (the model file's key stays `seeds`).
+    #[serde(rename = "seeds")]
+    pub anchors: usize,
     /// Channels of `S(M^P)`.
     pub features: usize,
     /// Channels after each stride-2 convolution of `E_sta`, down to 2×2.
@@ -35,8 +37,8 @@ pub struct SpaceShape {
     /// Width and depth of `R`.
     pub mlp: usize,
     pub mlp_layers: usize,
-    /// Each vertex's blended seed rotation replaced by its nearest rotation (polar
-    /// decomposition): a blend of seeds turned far apart (the skirt between legs in a split or
+    /// Each vertex's blended anchor rotation replaced by its nearest rotation (polar
+    /// decomposition): a blend of anchors turned far apart (the skirt between legs in a split or
     /// a raised leg) is near singular, and undoing it throws a vertex metres off. False in
     /// models from before it (their plain blend is kept).
     #[serde(default)]
@@ -44,10 +46,10 @@ pub struct SpaceShape {
 }
 
 impl SpaceShape {
-    /// `cpu` (64², 128 seeds, channels ≤ 256: trains on a laptop) or `paper` (128², 581 seeds,
+    /// `cpu` (64², 128 anchors, channels ≤ 256: trains on a laptop) or `paper` (128², 581 anchors,
     /// channels to 1024, as the reference; for a GPU).
     pub fn preset(name: &str) -> Result<SpaceShape> {
-        let (map, seeds, features, encoder, xi, mlp, mlp_layers) = match name {
+        let (map, anchors, features, encoder, xi, mlp, mlp_layers) = match name {
             "cpu" => (64, 128, 32, vec![32, 64, 128, 128, 256], 16, 128, 4),
             "paper" => (
                 128,
@@ -63,7 +65,7 @@ impl SpaceShape {
         Ok(SpaceShape {
             preset: name.into(),
             map,
-            seeds,
+            anchors,
             features,
             encoder,
             latent: 64,
@@ -105,7 +107,12 @@ pub struct Consts {
 }
 
 impl Consts {
-    pub fn new(garment: &TriMesh, raster: &UvRaster, seeds: &Seeds, device: Device) -> Consts {
+    pub fn new(
+        garment: &TriMesh,
+        raster: &UvRaster,
+        anchors: &BodyAnchors,
+        device: Device,
+    ) -> Consts {
         let t = raster.texel_vertices.len() as i64;
         let flat =
             |v: Vec<f32>, dims: &[i64]| Tensor::from_slice(&v).reshape(dims).to_device(device);
@@ -141,11 +148,11 @@ impl Consts {
                 &[v, 3],
             ),
             seed_rest: flat(
-                seeds.rest.iter().flatten().copied().collect(),
-                &[seeds.rest.len() as i64, 3],
+                anchors.rest.iter().flatten().copied().collect(),
+                &[anchors.rest.len() as i64, 3],
             ),
             seed_part: Tensor::from_slice(
-                &seeds.parts.iter().map(|&p| p as i64).collect::<Vec<_>>(),
+                &anchors.parts.iter().map(|&p| p as i64).collect::<Vec<_>>(),
             )
             .to_device(device),
         }
@@ -199,8 +206,8 @@ pub struct Space {
     networks_idle: bool,
 }
 
-/// Initial kernel radius (metres): under the seed spacing (~6 cm for the cpu preset on the skirt), so
-/// each vertex starts on its few nearest seeds (the waist band then follows the hips within 2 cm).
+/// Initial kernel radius (metres): under the anchor spacing (~6 cm for the cpu preset on the skirt), so
+/// each vertex starts on its few nearest anchors (the waist band then follows the hips within 2 cm).
 pub const RADIUS0: f64 = 0.05;
 /// `R`'s output scale: displacements start at millimetres.
 const DISPLACEMENT_SCALE: f64 = 0.05;
@@ -216,7 +223,7 @@ impl Space {
         shape.check()?;
         let vs = nn::VarStore::new(device);
         let root = vs.root();
-        let input = 3 * shape.seeds as i64 + 1;
+        let input = 3 * shape.anchors as i64 + 1;
         let f = shape.features as i64;
         let bound = 1.0 / (input as f64).sqrt();
         let s0_weight = (&root / "s" / "0").var(
@@ -297,7 +304,7 @@ impl Space {
         for k in 0..shape.mlp_layers {
             let last = k + 1 == shape.mlp_layers;
             let o = if last { 3 } else { shape.mlp as i64 };
-            // The last layer starts at zero: the untrained space is plain seed skinning of the rest garment.
+            // The last layer starts at zero: the untrained space is plain anchor skinning of the rest garment.
             let config = if last {
                 zero_linear
             } else {
@@ -341,12 +348,12 @@ impl Space {
     }
 
     /// `S`'s first layer applied to the body-relative descriptor map `M^P` of garments
-    /// `g [B, V, 3]` against seeds `b [B, N, 3]`, without building the `3N`-channel map: a
+    /// `g [B, V, 3]` against anchors `b [B, N, 3]`, without building the `3N`-channel map: a
     /// linear layer over `[g_i − b_j]_j` is `A g_i − Σ_j W_j b_j` with `A = Σ_j W_j`, and
     /// scattering vertices into texels (barycentric weights summing to one) commutes with it.
     /// Exactly the 1×1 convolution of the map; `[B, C, H, W]` before the activation.
     pub fn descriptor_features(&self, g: &Tensor, b: &Tensor) -> Tensor {
-        let n = self.shape.seeds as i64;
+        let n = self.shape.anchors as i64;
         let c = self.s0_weight.size()[0];
         let w = self.s0_weight.narrow(1, 0, 3 * n).reshape([c, n, 3]);
         let a = w.sum_dim_intlist(1, false, Kind::Float);
@@ -387,13 +394,13 @@ impl Space {
             .permute([0, 2, 1])
     }
 
-    /// Where garments `g [B, V, 3]` go when they follow the seeds rigidly from transforms
+    /// Where garments `g [B, V, 3]` go when they follow the anchors rigidly from transforms
     /// `before` to `now` (each vertex's blended transform undone, then redone).
     pub fn follow(&self, g: &Tensor, before: &Tensor, now: &Tensor) -> Tensor {
         self.skin(&self.unskin(g, before), now)
     }
 
-    /// Garments `g [B, V, 3]` with each vertex's seed-blended transform under `m` undone.
+    /// Garments `g [B, V, 3]` with each vertex's anchor-blended transform under `m` undone.
     pub fn unskin(&self, g: &Tensor, m: &Tensor) -> Tensor {
         let (rot, shift) = self.blended(m);
         inverse3(&rot)
@@ -401,7 +408,7 @@ impl Space {
             .squeeze_dim(3)
     }
 
-    /// `Z [B, L]` of garments `g` with seeds at `b` and seed transforms `m`:
+    /// `Z [B, L]` of garments `g` with anchors at `b` and anchor transforms `m`:
     /// `E_sta(S(M^P))` plus the linear path's projection of the unskinned displacements.
     pub fn encode(&self, g: &Tensor, b: &Tensor, m: &Tensor) -> Tensor {
         self.encode_keeping_features(g, b, m).1
@@ -425,7 +432,7 @@ impl Space {
         self.networks_idle
     }
 
-    /// Garments `g [B, V, 3]` unskinned by seed transforms `m` (each vertex's blended transform
+    /// Garments `g [B, V, 3]` unskinned by anchor transforms `m` (each vertex's blended transform
     /// inverted) and expressed as displacements in the vertices' rest frames, `[B, 3V]`: what
     /// [`Space::canonical`] would have to output to reproduce `g` exactly.
     pub fn rest_displacements(&self, g: &Tensor, m: &Tensor) -> Tensor {
@@ -531,7 +538,7 @@ impl Space {
             )
     }
 
-    /// Each vertex's seed-blended transform under seed transforms `m [B, N, 12]` (row-major
+    /// Each vertex's anchor-blended transform under anchor transforms `m [B, N, 12]` (row-major
     /// 3×4): rotation part `[B, V, 3, 3]` and translation `[B, V, 3]`. The weights are
     /// `softmax_j(−|g0_i − b0_j|² / 2ρ²_part(j))` at the REST garment `g0` (the paper evaluates
     /// them at the decoded `ĝ`): fixed weights make the skinning invertible per vertex, which
@@ -593,7 +600,7 @@ impl Space {
         self.networks_idle = all_zero(&self.vs, &outputs);
     }
 
-    /// Skins canonical garments `[B, V, 3]` by the seeds' transforms `m [B, N, 12]`.
+    /// Skins canonical garments `[B, V, 3]` by the anchors' transforms `m [B, N, 12]`.
     pub fn skin(&self, canonical: &Tensor, m: &Tensor) -> Tensor {
         Self::skin_blended(canonical, &self.blended(m))
     }
@@ -604,8 +611,8 @@ impl Space {
         rot.matmul(&canonical.unsqueeze(3)).squeeze_dim(3) + shift
     }
 
-    /// Encode → decode → skin: the space's reconstruction of garments `g` with seeds at `b`
-    /// and seed transforms `m`; also returns `z` and the canonical garments.
+    /// Encode → decode → skin: the space's reconstruction of garments `g` with anchors at `b`
+    /// and anchor transforms `m`; also returns `z` and the canonical garments.
     pub fn reconstruct(&self, g: &Tensor, b: &Tensor, m: &Tensor) -> (Tensor, Tensor, Tensor) {
         let z = self.encode(g, b, m);
         let canonical = self.canonical(&z);
@@ -774,7 +781,7 @@ pub(crate) mod tests {
     #[test]
     fn the_adjugate_inverse_equals_lu() {
         tch::manual_seed(3);
-        // Near rotations, as blended seed transforms are.
+        // Near rotations, as blended anchor transforms are.
         let m = Tensor::randn([2, 50, 3, 3], (Kind::Float, tch::Device::Cpu)) * 0.3
             + Tensor::eye(3, (Kind::Float, tch::Device::Cpu));
         let ours = inverse3(&m);
@@ -785,7 +792,7 @@ pub(crate) mod tests {
         assert!(identity.abs().max().double_value(&[]) < 1e-5);
     }
 
-    /// A 3-seed space on an 8² map over a small grid garment.
+    /// A 3-anchor space on an 8² map over a small grid garment.
     pub(crate) fn small_space() -> (Space, TriMesh) {
         let mut mesh = grid(3, 3, 0.1);
         let uv: Vec<[f32; 2]> = mesh
@@ -798,16 +805,16 @@ pub(crate) mod tests {
             triangles: mesh.triangles.clone(),
         });
         let raster = UvRaster::new(&mesh, 8, "grid").unwrap();
-        let seeds = Seeds {
+        let anchors = BodyAnchors {
             vertices: vec![0, 1, 2],
             rest: vec![[0.0, -0.1, 0.0], [0.3, -0.1, 0.0], [0.0, -0.1, 0.3]],
             parts: vec![0, 1, 2],
         };
-        let consts = Consts::new(&mesh, &raster, &seeds, Device::Cpu);
+        let consts = Consts::new(&mesh, &raster, &anchors, Device::Cpu);
         let shape = SpaceShape {
             preset: "test".into(),
             map: 8,
-            seeds: 3,
+            anchors: 3,
             features: 4,
             encoder: vec![4, 4],
             latent: 5,
@@ -860,7 +867,7 @@ pub(crate) mod tests {
             (&canonical - &rest).abs().max().double_value(&[]) < 1e-7,
             "R starts at zero"
         );
-        // Every seed translated by t: the garment moves by t.
+        // Every anchor translated by t: the garment moves by t.
         let mut m = [0f32; 12];
         (m[0], m[5], m[10], m[3], m[7], m[11]) = (1.0, 1.0, 1.0, 0.5, -0.25, 2.0);
         let m = Tensor::from_slice(&m)
@@ -873,7 +880,7 @@ pub(crate) mod tests {
         assert_eq!(mesh.vertex_count(), 16);
     }
 
-    /// Three frames: random seed transforms near identity `[3, 3, 12]`, random garments.
+    /// Three frames: random anchor transforms near identity `[3, 3, 12]`, random garments.
     fn random_frames(space: &Space) -> (Tensor, Tensor) {
         let eye = Tensor::from_slice(&[1f32, 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0.]);
         let m =

@@ -1,6 +1,6 @@
-//! Body seed points: where the dynamic model measures the garment from and what skins it.
-//! Farthest-point sampling (Euclidean, on the rest body's vertices near the garment: seeds far
-//! from every garment vertex would carry no weight), each seed labelled with a body part by its
+//! Body anchor points: where the dynamic model measures the garment from and what skins it.
+//! Farthest-point sampling (Euclidean, on the rest body's vertices near the garment: anchors far
+//! from every garment vertex would carry no weight), each anchor labelled with a body part by its
 //! dominant joint; one learnable kernel radius per part.
 
 use crate::body::Body;
@@ -40,18 +40,23 @@ pub fn part_of(joint: &str) -> usize {
     }
 }
 
-/// The seeds: body vertex, rest position, part.
+/// The anchors: body vertex, rest position, part.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Seeds {
+pub struct BodyAnchors {
     pub vertices: Vec<u32>,
     pub rest: Vec<[f32; 3]>,
     pub parts: Vec<usize>,
 }
 
-impl Seeds {
-    /// `count` seeds by farthest-point sampling over the body vertices within `reach` metres of
+impl BodyAnchors {
+    /// `count` anchors by farthest-point sampling over the body vertices within `reach` metres of
     /// the garment at rest, starting from the one nearest the garment's centroid.
-    pub fn sample(body: &Body, garment: &[[f32; 3]], count: usize, reach: f32) -> Result<Seeds> {
+    pub fn sample(
+        body: &Body,
+        garment: &[[f32; 3]],
+        count: usize,
+        reach: f32,
+    ) -> Result<BodyAnchors> {
         let index = PointIndex::new(garment)?;
         let near: Vec<u32> = (0..body.mesh.vertex_count() as u32)
             .filter(|&v| index.nearest(body.mesh.positions[v as usize]).1 <= reach)
@@ -97,7 +102,7 @@ impl Seeds {
                 part_of(&body.skeleton.joint_names[j])
             })
             .collect();
-        Ok(Seeds {
+        Ok(BodyAnchors {
             rest: chosen
                 .iter()
                 .map(|&v| body.mesh.positions[v as usize])
@@ -107,8 +112,8 @@ impl Seeds {
         })
     }
 
-    /// Seeds stored by body vertex (a model file's), checked against the body.
-    pub fn from_vertices(body: &Body, vertices: &[u32], parts: &[usize]) -> Result<Seeds> {
+    /// Anchors stored by body vertex (a model file's), checked against the body.
+    pub fn from_vertices(body: &Body, vertices: &[u32], parts: &[usize]) -> Result<BodyAnchors> {
         let rest = vertices
             .iter()
             .map(|&v| body.mesh.positions.get(v as usize).copied())
@@ -117,7 +122,7 @@ impl Seeds {
             Some(rest)
                 if parts.len() == vertices.len() && parts.iter().all(|&p| p < PARTS.len()) =>
             {
-                Ok(Seeds {
+                Ok(BodyAnchors {
                     vertices: vertices.to_vec(),
                     rest,
                     parts: parts.to_vec(),
@@ -130,7 +135,7 @@ impl Seeds {
         }
     }
 
-    /// Each seed's LBS transform (rows 0..3 of the blended skinning matrix, row-major 3×4).
+    /// Each anchor's LBS transform (rows 0..3 of the blended skinning matrix, row-major 3×4).
     pub fn transforms(&self, body: &Body, skinning: &[Matrix4<f32>]) -> Vec<[f32; 12]> {
         self.vertices
             .iter()
