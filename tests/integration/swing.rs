@@ -123,9 +123,10 @@ fn the_swing_follows_the_motion_history() {
 }
 
 /// The swing baked into ≤ 16 blend shapes over one weight track: Khronos-clean, and three.js's
-/// replay of every frame of 131_02 within 1 mm of the network played in order.
+/// replay of every frame of 131_02, and Blender's importer on every 25th, within 1 mm of the
+/// network played in order.
 #[test]
-fn a_baked_swing_replays_the_network_in_threejs() {
+fn a_baked_swing_replays_the_network_in_threejs_and_blender() {
     let dir = out_dir("swing_bake");
     let model = load(with_inertia());
     let (frames, _) = play(&model);
@@ -167,4 +168,32 @@ fn a_baked_swing_replays_the_network_in_threejs() {
         frames.len()
     );
     assert!(error_mm < 1.0, "{error_mm:.3} mm");
+    // Blender's own glTF importer, every 25th frame and the last, against the same network.
+    let picked: Vec<usize> = (0..frames.len())
+        .step_by(25)
+        .chain([frames.len() - 1])
+        .collect();
+    let result = crate::common::blender_positions(&glb, &picked, 30.0);
+    let garment = result["meshes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|m| m["gltf_mesh"] == 0)
+        .expect("garment mesh");
+    assert_eq!(garment["shape_key_count"], 16, "{garment}");
+    let mut worst_mm = 0.0f32;
+    for (i, &f) in picked.iter().enumerate() {
+        let blender = crate::common::flat_positions(&garment["frames"][i]["positions"]);
+        let network: Vec<[f32; 3]> = mesh
+            .source_vertex
+            .iter()
+            .map(|&v| frames[f][v as usize])
+            .collect();
+        worst_mm = worst_mm.max(1000.0 * crate::common::max_distance(&blender, &network));
+    }
+    println!(
+        "Blender 3.4 replay of the same bake: max {worst_mm:.3} mm over {} frames",
+        picked.len()
+    );
+    assert!(worst_mm < 1.0, "{worst_mm:.3} mm");
 }
