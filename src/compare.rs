@@ -503,7 +503,7 @@ impl std::fmt::Display for Report {
                 c.name,
                 pair(sc.rms_mm.first_50, sc.rms_mm.clip),
                 pair(sc.own_mm.first_50, sc.own_mm.clip),
-                pair(sc.versus_mean_rms_mm.first_50, sc.versus_mean_rms_mm.clip)
+                pair(sc.against_mean_rms_mm.first_50, sc.against_mean_rms_mm.clip)
             )?;
         }
         let at = |v: &[f64]| {

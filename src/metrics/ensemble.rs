@@ -6,7 +6,7 @@
 //! a cache M has E|M − X|² = |M − μ|² + σ². So σ² is half the mean squared distance between two
 //! runs (E|X − Y|² = 2σ²), and a cache's own error is `b = √(mean_i MSE(M, X_i) − σ²)`: a
 //! re-run of the simulator scores b ≈ σ, the blurred mean garment μ scores 0 (it is not a garment
-//! any run shows; the hem's amplitude in `hem` tells it apart). Mean *distances* (versus.rs)
+//! any run shows; the hem's amplitude in `hem` tells it apart). Mean *distances* (reference_error.rs)
 //! do not add this way, and a run against the mean of two others is not comparable with a model
 //! against one run (E|X − mean₂|² = 1.5σ²): every figure here is of one cache against one run.
 
@@ -17,7 +17,7 @@ use std::ops::Range;
 pub type Frames = [Vec<[f32; 3]>];
 
 /// A figure over the first 50 predicted frames and over the whole clip (frame 0, the start, left
-/// out as in versus.rs).
+/// out as in reference_error.rs).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Spans {
     pub first_50: f64,
@@ -103,8 +103,9 @@ pub struct Score {
     /// `b = √(max(0, mean_i MSE − σ²))`: the cache's own error, its RMS distance from the
     /// expected garment. A run of the simulator scores about σ here.
     pub own_mm: Spans,
-    /// RMS against the runs' mean garment.
-    pub versus_mean_rms_mm: Spans,
+    /// RMS against the runs' mean garment (key `versus_mean_rms_mm` in reports).
+    #[serde(rename = "versus_mean_rms_mm")]
+    pub against_mean_rms_mm: Spans,
     /// b estimated from the mean garment instead, `√(MSE(cache, mean) − σ²/n)`: the same in
     /// expectation; the two differing says the runs are too few to trust b.
     pub own_from_mean_mm: Spans,
@@ -194,7 +195,7 @@ impl<'a> Ensemble<'a> {
             each_rms_mm: each.iter().map(|e| Spans::of(e, mm)).collect(),
             rms_mm: mean_of.map(mm),
             own_mm: own(mean_of, 1.0),
-            versus_mean_rms_mm: to_mean.map(mm),
+            against_mean_rms_mm: to_mean.map(mm),
             own_from_mean_mm: own(to_mean, 1.0 / n),
         }
     }

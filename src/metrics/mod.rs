@@ -1,7 +1,7 @@
 //! Garment metrics of posed frames against the posed body: edge error and strain, bending,
 //! collided vertices (split at body self-overlap), gravity energy. Plain arrays on the CPU,
 //! exact nearest neighbours: shared by training validation, `eval` and the exporters' checks.
-//! `versus`: a played garment against simulated reference caches; `ensemble`, `hem`,
+//! `reference_error`: a played garment against simulated reference caches; `ensemble`, `hem`,
 //! `plausibility`: what `compare` measures of caches against perturbed simulations.
 
 use crate::body::{Body, PosedBody};
@@ -13,7 +13,7 @@ use serde::{Deserialize, Serialize};
 pub mod ensemble;
 pub mod hem;
 pub mod plausibility;
-pub mod versus;
+pub mod reference_error;
 
 /// The PBNS metrics, averaged over frames.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]

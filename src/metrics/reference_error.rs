@@ -9,9 +9,10 @@ use serde::{Deserialize, Serialize};
 /// Frames per clip: per frame, per vertex.
 pub type Frames = [Vec<[f32; 3]>];
 
-/// Mean vertex L2 distance to a reference, over spans of the played frames (frame 0 the start).
+/// The error of played frames against a reference: mean vertex L2 distance, over spans of the
+/// played frames (frame 0 the start).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Versus {
+pub struct ReferenceError {
     pub one_step_mm: f64,
     pub first_50_mm: f64,
     pub clip_mm: f64,
@@ -19,14 +20,14 @@ pub struct Versus {
     pub worst_frame: usize,
 }
 
-impl Versus {
+impl ReferenceError {
     /// `frames` against `reference`, frame by frame (the shorter's length).
-    pub fn between(frames: &Frames, reference: &Frames) -> Versus {
-        Versus::of(&distances_mm(frames, reference))
+    pub fn between(frames: &Frames, reference: &Frames) -> ReferenceError {
+        ReferenceError::of(&distances_mm(frames, reference))
     }
 
     /// From each frame's mean and largest distance (frame 0 the start, not a prediction).
-    pub fn of(per_frame: &[(f64, f64)]) -> Versus {
+    pub fn of(per_frame: &[(f64, f64)]) -> ReferenceError {
         let mean = |s: &[(f64, f64)]| s.iter().map(|x| x.0).sum::<f64>() / s.len().max(1) as f64;
         let predicted = &per_frame[1.min(per_frame.len())..];
         let (worst_frame, max) =
@@ -34,7 +35,7 @@ impl Versus {
                 .iter()
                 .enumerate()
                 .fold((0, 0.0), |b, (f, x)| if x.1 > b.1 { (f, x.1) } else { b });
-        Versus {
+        ReferenceError {
             one_step_mm: mean(&predicted[..1.min(predicted.len())]),
             first_50_mm: mean(&predicted[..50.min(predicted.len())]),
             clip_mm: mean(predicted),
@@ -44,11 +45,11 @@ impl Versus {
     }
 
     /// The means of several comparisons; the largest distance of all (and its frame).
-    pub fn mean(all: &[Versus]) -> Versus {
+    pub fn mean(all: &[ReferenceError]) -> ReferenceError {
         let n = all.len().max(1) as f64;
-        let mean = |f: fn(&Versus) -> f64| all.iter().map(f).sum::<f64>() / n;
+        let mean = |f: fn(&ReferenceError) -> f64| all.iter().map(f).sum::<f64>() / n;
         let worst = all.iter().max_by(|a, b| a.max_mm.total_cmp(&b.max_mm));
-        Versus {
+        ReferenceError {
             one_step_mm: mean(|v| v.one_step_mm),
             first_50_mm: mean(|v| v.first_50_mm),
             clip_mm: mean(|v| v.clip_mm),
@@ -84,11 +85,12 @@ pub struct Simulations<'a> {
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Ensemble {
     /// Against each simulation, in the order given.
-    pub each: Vec<Versus>,
+    pub each: Vec<ReferenceError>,
     /// Those averaged: how far the played garment is from a simulation.
-    pub mean_of_each: Versus,
-    /// Against the simulations' vertex-wise mean garment.
-    pub versus_mean: Versus,
+    pub mean_of_each: ReferenceError,
+    /// Against the simulations' vertex-wise mean garment (key `versus_mean` in reports).
+    #[serde(rename = "versus_mean")]
+    pub against_mean: ReferenceError,
 }
 
 impl<'a> Simulations<'a> {
@@ -102,34 +104,34 @@ impl<'a> Simulations<'a> {
 
     /// `frames` against each simulation and against their mean garment.
     pub fn ensemble(&self, frames: &Frames) -> Ensemble {
-        let each: Vec<Versus> = self
+        let each: Vec<ReferenceError> = self
             .caches
             .iter()
-            .map(|r| Versus::between(frames, r))
+            .map(|r| ReferenceError::between(frames, r))
             .collect();
         Ensemble {
-            mean_of_each: Versus::mean(&each),
-            versus_mean: Versus::between(frames, &self.mean),
+            mean_of_each: ReferenceError::mean(&each),
+            against_mean: ReferenceError::between(frames, &self.mean),
             each,
         }
     }
 
     /// Every pair of simulations against each other, averaged: the simulator's own spread.
-    pub fn spread(&self) -> Versus {
+    pub fn spread(&self) -> ReferenceError {
         let c = self.caches;
-        let pairs: Vec<Versus> = (0..c.len())
+        let pairs: Vec<ReferenceError> = (0..c.len())
             .flat_map(|i| (i + 1..c.len()).map(move |j| (i, j)))
-            .map(|(i, j)| Versus::between(&c[i], &c[j]))
+            .map(|(i, j)| ReferenceError::between(&c[i], &c[j]))
             .collect();
-        Versus::mean(&pairs)
+        ReferenceError::mean(&pairs)
     }
 
     /// Each simulation against the vertex-wise mean garment of the others, averaged: how near
     /// the simulator's own re-runs, pooled, come to one run they did not start from. A model
     /// scoring this against the simulations predicts as well as re-simulating would.
-    pub fn from_the_others(&self) -> Versus {
+    pub fn from_the_others(&self) -> ReferenceError {
         let c = self.caches;
-        let each: Vec<Versus> = (0..c.len())
+        let each: Vec<ReferenceError> = (0..c.len())
             .map(|i| {
                 let others: Vec<_> = c
                     .iter()
@@ -137,10 +139,10 @@ impl<'a> Simulations<'a> {
                     .filter(|(j, _)| *j != i)
                     .map(|x| x.1)
                     .collect();
-                Versus::between(&c[i], &mean_garment(&others))
+                ReferenceError::between(&c[i], &mean_garment(&others))
             })
             .collect();
-        Versus::mean(&each)
+        ReferenceError::mean(&each)
     }
 }
 
@@ -180,7 +182,7 @@ mod tests {
         offsets[1] = 4.0;
         offsets[59] = 30.0;
         let b = cache(&offsets);
-        let v = Versus::between(&b, &a);
+        let v = ReferenceError::between(&b, &a);
         assert!((v.one_step_mm - 4.0).abs() < 1e-3, "{v:?}");
         assert!((v.first_50_mm - 4.0 / 50.0).abs() < 1e-3, "{v:?}");
         assert!((v.clip_mm - 34.0 / 59.0).abs() < 1e-3, "{v:?}");
@@ -196,7 +198,7 @@ mod tests {
             "{e:?}"
         );
         assert!(
-            (e.versus_mean.clip_mm - v.clip_mm / 2.0).abs() < 1e-4,
+            (e.against_mean.clip_mm - v.clip_mm / 2.0).abs() < 1e-4,
             "{e:?}"
         );
         assert!((sims.spread().clip_mm - v.clip_mm).abs() < 1e-4);

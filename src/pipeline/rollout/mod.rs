@@ -12,7 +12,7 @@ use crate::compute::Compute;
 use crate::eval::lbs_frames;
 use crate::geometry::PointIndex;
 use crate::io::point_cache::{read_pc2, write_cache_in, write_caches_in};
-use crate::metrics::versus::{distances_mm, Simulations, Versus};
+use crate::metrics::reference_error::{distances_mm, ReferenceError, Simulations};
 use crate::models::file::ModelFile;
 use crate::motion::{chain, load_clip, read_maps};
 use crate::rig::weights::smooth_garment_skin;
@@ -221,7 +221,7 @@ pub fn run(request: &Request, outputs: OutputSet, feedback: &Feedback) -> Result
         })
         .transpose()?;
     let (first, lbs_reference, all) =
-        versus_references(&r.references, &references, &rollout.frames, lbs.as_deref());
+        errors_against_references(&r.references, &references, &rollout.frames, lbs.as_deref());
     Ok(Report {
         motions: r.motions.clone(),
         fps,
@@ -249,19 +249,23 @@ pub fn run(request: &Request, outputs: OutputSet, feedback: &Feedback) -> Result
 /// The roll-out and plain LBS (present whenever there is a reference) against the first
 /// reference, and with two or more, against each, their mean and their own spread (each
 /// distance computed once: the first reference's are the ensembles' first).
-fn versus_references(
+fn errors_against_references(
     paths: &[PathBuf],
     references: &[Vec<Vec<[f32; 3]>>],
     rollout: &[Vec<[f32; 3]>],
     lbs: Option<&[Vec<[f32; 3]>]>,
-) -> (Option<Versus>, Option<Versus>, Option<References>) {
+) -> (
+    Option<ReferenceError>,
+    Option<ReferenceError>,
+    Option<References>,
+) {
     let (Some(first), Some(lbs)) = (references.first(), lbs) else {
         return (None, None, None);
     };
     let Some(sims) = Simulations::new(references) else {
         return (
-            Some(Versus::between(rollout, first)),
-            Some(Versus::between(lbs, first)),
+            Some(ReferenceError::between(rollout, first)),
+            Some(ReferenceError::between(lbs, first)),
             None,
         );
     };
@@ -350,7 +354,7 @@ fn restarts(
         )?;
         let per_frame = distances_mm(&rollout.frames, &reference[span]);
         let mean = per_frame.iter().map(|d| d.0).collect();
-        each.push((start, Versus::of(&per_frame), mean));
+        each.push((start, ReferenceError::of(&per_frame), mean));
     }
     bar.finish_and_clear();
     Ok(Restarts::of(every, each))

@@ -2,7 +2,7 @@
 //! reference simulations and restarts, what it wrote; and the report as text.
 
 use crate::bake::sequence::SequenceReport;
-use crate::metrics::versus::{Ensemble, Versus};
+use crate::metrics::reference_error::{Ensemble, ReferenceError};
 use crate::rollout::timing::Timing;
 use crate::simulate::stats::{FrameStats, Summary};
 use crate::validate::Validation;
@@ -15,10 +15,10 @@ use std::path::PathBuf;
 pub struct References {
     pub paths: Vec<PathBuf>,
     /// Every pair of simulations against each other, averaged: the simulator's own spread.
-    pub spread: Versus,
+    pub spread: ReferenceError,
     /// Each simulation against the mean garment of the others, averaged: how well re-running
     /// the simulator predicts a run it did not start from.
-    pub from_the_others: Versus,
+    pub from_the_others: ReferenceError,
     /// The roll-out, and plain LBS, against each simulation and against their mean.
     pub rollout: Ensemble,
     pub lbs: Ensemble,
@@ -29,7 +29,7 @@ pub struct References {
 pub struct Restarts {
     pub frames: usize,
     /// Each restart's first frame (of the clip) and its error against the reference.
-    pub each: Vec<(usize, Versus)>,
+    pub each: Vec<(usize, ReferenceError)>,
     /// Means over the restarts: after one step, and over each restart's frames.
     pub one_step_mm: f64,
     pub mean_mm: f64,
@@ -40,7 +40,7 @@ pub struct Restarts {
 
 impl Restarts {
     /// From each restart's first frame, its error and its error per frame (frame 0 first).
-    pub(super) fn of(frames: usize, each: Vec<(usize, Versus, Vec<f64>)>) -> Restarts {
+    pub(super) fn of(frames: usize, each: Vec<(usize, ReferenceError, Vec<f64>)>) -> Restarts {
         let n = each.len().max(1) as f64;
         let by_step_mm = (1..=frames)
             .map(|k| each.iter().map(|e| e.2[k]).sum::<f64>() / n)
@@ -102,13 +102,13 @@ pub struct Report {
     /// The same per 100 frames: whether a long roll-out drifts or blows up.
     pub windows: Vec<Window>,
     /// Against the (first) reference.
-    pub reference: Option<Versus>,
+    pub reference: Option<ReferenceError>,
     /// With several references: against each, and their own spread.
     pub references: Option<References>,
     /// With --restart-every: the model restarted from the reference along the clip.
     pub restarts: Option<Restarts>,
     /// Plain LBS of the rest garment against the same reference.
-    pub lbs_reference: Option<Versus>,
+    pub lbs_reference: Option<ReferenceError>,
     pub lbs_out: Option<PathBuf>,
     pub out: PathBuf,
     pub out_bytes: u64,
@@ -264,7 +264,7 @@ impl Display for Report {
 impl Display for References {
     fn fmt(&self, f: &mut Formatter) -> fmt::Result {
         let all = self;
-        let spans = |v: &Versus| {
+        let spans = |v: &ReferenceError| {
             format!(
                 "{:.2} / {:.2} / {:.2} mm",
                 v.one_step_mm, v.first_50_mm, v.clip_mm
@@ -288,13 +288,13 @@ impl Display for References {
             f,
             "  roll-out, mean over the simulations: {} (their mean garment: {})",
             spans(&all.rollout.mean_of_each),
-            spans(&all.rollout.versus_mean)
+            spans(&all.rollout.against_mean)
         )?;
         writeln!(
             f,
             "  plain LBS, mean over the simulations: {} (their mean garment: {})",
             spans(&all.lbs.mean_of_each),
-            spans(&all.lbs.versus_mean)
+            spans(&all.lbs.against_mean)
         )?;
         writeln!(
             f,
