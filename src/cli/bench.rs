@@ -1,6 +1,6 @@
 //! `garmentbake bench train`: throughput of the training step and where its time goes.
 //! `garmentbake bench rollout`: a dynamic model's roll-out against Blender's cloth solver on the
-//! same frames, in the same run.
+//! same frames, in the same run. `bench swing`: the swing trainer's setup and epochs.
 
 use super::args::{CollisionFixArgs, ComputeArgs, FabricArgs, OutputArgs, TrainInputs};
 use super::Execute;
@@ -15,7 +15,8 @@ use std::path::PathBuf;
 /// Measure speed. `train`: poses/s, garment-vertex-poses/s and the split between forward,
 /// losses, nearest neighbour (candidate lookup + amortised k-d tree refreshes) and backward.
 /// `rollout`: ms per frame of a dynamic model's roll-out (network phases, collision fix) beside
-/// Blender's cloth simulation of the same frames, and the ratio.
+/// Blender's cloth simulation of the same frames, and the ratio. `bake`: a PBNS bake by phase
+/// beside Blender's glTF export. `swing`: `train-swing`'s setup and epochs, and the recipe's time.
 #[derive(clap::Args)]
 pub struct Args {
     #[command(subcommand)]
@@ -30,6 +31,29 @@ enum What {
     Rollout(RolloutBench),
     /// Time a PBNS bake by phase beside Blender's glTF export of the same asset.
     Bake(BakeBench),
+    /// Time `train-swing` on real inputs: setup, epochs, the recipe's projected time.
+    Swing(SwingBench),
+}
+
+#[derive(clap::Args)]
+struct SwingBench {
+    /// The quasi-static PBNS the swing trains on (.safetensors).
+    #[arg(long)]
+    from: PathBuf,
+    #[command(flatten)]
+    clips: super::args::ClipArgs,
+    /// Epochs timed.
+    #[arg(long, default_value_t = 2)]
+    epochs: usize,
+    /// Swing blend shapes and bones (as `train-swing`).
+    #[arg(long, default_value_t = crate::train::swing::Settings::recipe().shapes)]
+    shapes: usize,
+    #[arg(long, default_value_t = 0)]
+    bones: usize,
+    #[command(flatten)]
+    compute: ComputeArgs,
+    #[command(flatten)]
+    output: OutputArgs,
 }
 
 #[derive(clap::Args)]
@@ -106,6 +130,7 @@ pub enum Report {
     },
     Rollout(RolloutTimes),
     Bake(crate::pipeline::bench_bake::Report),
+    Swing(crate::pipeline::bench_swing::SwingTimes),
 }
 
 impl Args {
@@ -114,6 +139,7 @@ impl Args {
             What::Train(b) => b.output.json,
             What::Rollout(b) => b.output.json,
             What::Bake(b) => b.output.json,
+            What::Swing(b) => b.output.json,
         }
     }
 }
@@ -147,6 +173,17 @@ impl Execute for Args {
         let b = match &self.what {
             What::Train(b) => b,
             What::Rollout(r) => return Ok(Report::Rollout(r.run(say)?)),
+            What::Swing(s) => {
+                let request = crate::pipeline::bench_swing::Request {
+                    from: s.from.clone(),
+                    clips: s.clips.clips(),
+                    epochs: s.epochs,
+                    shapes: s.shapes,
+                    bones: s.bones,
+                    compute: s.compute.compute(),
+                };
+                return Ok(Report::Swing(crate::pipeline::bench_swing::run(&request)?));
+            }
             What::Bake(b) => {
                 let request = crate::pipeline::bench_bake::Request {
                     model: b.model.clone(),
@@ -173,6 +210,7 @@ impl Execute for Args {
             Report::Train { bench, threads } => (bench, *threads),
             Report::Rollout(t) => return print!("{t}"),
             Report::Bake(b) => return print!("{b}"),
+            Report::Swing(s) => return print!("{s}"),
         };
         println!(
             "{} steps of {} poses, {} garment vertices, {} training poses, {} threads",

@@ -14,6 +14,7 @@
 
 pub mod bench_bake;
 pub mod bench_rollout;
+pub mod bench_swing;
 pub mod compare;
 pub mod eval;
 pub mod outputs;
