@@ -15,7 +15,7 @@ use crate::models::file::ModelFile;
 use crate::preview::plot::{line_chart, stack, Chart, Line, LINE_COLORS};
 use crate::rig::JointTransform;
 use crate::rollout::{for_model, Init};
-use crate::simulate::stats::{self, Series};
+use crate::simulate::stats::{self, ClipSetup};
 use anyhow::{bail, Result};
 use nalgebra::Matrix4;
 use serde::Serialize;
@@ -213,9 +213,9 @@ pub fn compare(inputs: &Inputs, settings: &Settings) -> Result<Report> {
         .collect();
     let run_swings: Vec<Swing> = runs.iter().map(swing).collect();
     let sims_amplitude = run_swings.iter().map(|s| s.amplitude_mm).sum::<f64>() / n as f64;
-    let series = Series::unpinned(inputs.body, inputs.garment, inputs.fps);
+    let setup = ClipSetup::unpinned(inputs.body, inputs.garment, inputs.fps);
     let inside = |f: &[Vec<[f32; 3]>]| {
-        stats::of(&series, f, inputs.poses, &[], None)
+        stats::of(&setup, f, inputs.poses, &[], None)
             .1
             .inside
             .inside_pct

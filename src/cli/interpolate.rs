@@ -7,7 +7,7 @@ use crate::io::point_cache::read_pc2;
 use crate::io::point_cache::write_cache_in;
 use crate::metrics::vertex_distances_mm;
 use crate::motion::{load_clip, read_maps};
-use crate::simulate::stats::{self, FrameStats, Series};
+use crate::simulate::stats::{self, ClipSetup, FrameStats};
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
 use std::path::PathBuf;
@@ -110,7 +110,7 @@ impl Execute for Args {
         })?;
         outputs.commit()?;
         let (per_frame, summary) = stats::of(
-            &Series::unpinned(&file.body, &file.garment, fps),
+            &ClipSetup::unpinned(&file.body, &file.garment, fps),
             &path.frames,
             &poses[a..=b],
             &[],

@@ -179,7 +179,7 @@ pub fn run(
         );
     }
     stats::check(&sim.garment, prepared.fps, settings.speed_limit, lead)?;
-    let series = stats::Series {
+    let setup = stats::ClipSetup {
         body: scene.body,
         rest: &scene.garment.mesh.positions,
         triangles: &scene.garment.mesh.triangles,
@@ -188,7 +188,7 @@ pub fn run(
     };
     let garment = sim.garment[lead..].to_vec();
     let (frames, summary) = stats::of(
-        &series,
+        &setup,
         &garment,
         &prepared.poses[lead..],
         &prepared.garment_targets[lead..],

@@ -34,8 +34,9 @@ pub struct Summary {
     pub pinned_error_max_mm: f64,
 }
 
-/// Everything the stats need of one clip.
-pub struct Series<'a> {
+/// The setup the stats measure a clip's frames against (not the frames themselves): the body,
+/// the garment at rest (its triangles and pinned vertices) and the frame rate.
+pub struct ClipSetup<'a> {
     pub body: &'a Body,
     pub rest: &'a [[f32; 3]],
     pub triangles: &'a [[u32; 3]],
@@ -43,10 +44,14 @@ pub struct Series<'a> {
     pub fps: f32,
 }
 
-impl<'a> Series<'a> {
+impl<'a> ClipSetup<'a> {
     /// A garment with no pinned vertices (a model's output) on `body`.
-    pub fn unpinned(body: &'a Body, garment: &'a crate::geometry::TriMesh, fps: f32) -> Series<'a> {
-        Series {
+    pub fn unpinned(
+        body: &'a Body,
+        garment: &'a crate::geometry::TriMesh,
+        fps: f32,
+    ) -> ClipSetup<'a> {
+        ClipSetup {
             body,
             rest: &garment.positions,
             triangles: &garment.triangles,
@@ -59,7 +64,7 @@ impl<'a> Series<'a> {
 /// Stats of `frames` (the clip's) posed by `poses`; `previous` is the frame before the first
 /// (the lead-in's last), for the first frame's speed.
 pub fn of(
-    s: &Series,
+    s: &ClipSetup,
     frames: &[Vec<[f32; 3]>],
     poses: &[Vec<JointTransform>],
     targets: &[Vec<[f32; 3]>],

@@ -117,7 +117,7 @@ pub fn fit_dynamics(
                 [s.windows as i64],
                 (Kind::Int64, device),
             );
-            let t0: Vec<Window> = Vec::<i64>::try_from(&pick)?
+            let t0: Vec<WindowStart> = Vec::<i64>::try_from(&pick)?
                 .iter()
                 .map(|&i| starts[i as usize])
                 .collect();
@@ -194,16 +194,16 @@ pub fn fit_model_dynamics(
     Ok(fit)
 }
 
-/// A window: its first predicted frame and its clip's first frame (history before the clip
+/// Where a training window starts: its first predicted frame and its clip's first frame (history before the clip
 /// is the clip's first frame held still, as `history_indices` and a roll-out from rest have it).
 #[derive(Clone, Copy, Debug)]
-struct Window {
+struct WindowStart {
     first: i64,
     clip: i64,
 }
 
 /// Every window of `k` frames that lies inside one clip after its first frame.
-fn window_starts(data: &FrameData, k: usize) -> Vec<Window> {
+fn window_starts(data: &FrameData, k: usize) -> Vec<WindowStart> {
     let mut ends = data.clip_starts[1..].to_vec();
     ends.push(data.len());
     data.clip_starts
@@ -212,7 +212,7 @@ fn window_starts(data: &FrameData, k: usize) -> Vec<Window> {
         .flat_map(|(&s, &e)| {
             (s + 1..=e.saturating_sub(k))
                 .filter(move |t| t + k <= e)
-                .map(move |t| Window {
+                .map(move |t| WindowStart {
                     first: t as i64,
                     clip: s as i64,
                 })
@@ -312,7 +312,7 @@ impl PosedFrames {
 /// pairs for frames t0−1 and t0−2).
 fn unroll_loss(
     model: &Played,
-    t0: &[Window],
+    t0: &[WindowStart],
     k: usize,
     noise: Option<(&Tensor, &Tensor)>,
 ) -> (Tensor, Tensor) {
@@ -436,9 +436,9 @@ fn strain_limited(g: &Tensor, (limit, band, iterations): &(&StrainLimit, f32, us
 
 /// RMS vertex distance (mm) of roll-outs over fixed windows: `windows` evenly spaced starts,
 /// `k` frames each, no noise (before and after the fit, on the same windows).
-fn measure(model: &Played, starts: &[Window], windows: usize, k: usize) -> f64 {
+fn measure(model: &Played, starts: &[WindowStart], windows: usize, k: usize) -> f64 {
     let step = (starts.len() / windows.max(1)).max(1);
-    let t0: Vec<Window> = starts.iter().step_by(step).take(windows).copied().collect();
+    let t0: Vec<WindowStart> = starts.iter().step_by(step).take(windows).copied().collect();
     let mut sum = 0.0;
     for chunk in t0.chunks(8) {
         let (pos, _) = tch::no_grad(|| unroll_loss(model, chunk, k, None));

@@ -19,12 +19,12 @@ use crate::rig::weights::smooth_garment_skin;
 use crate::rig::{JointTransform, SkelAnimation};
 use crate::rollout::timing::Timing;
 use crate::rollout::{for_model, Init, Settings};
-use crate::simulate::stats::{self, Series};
+use crate::simulate::stats::{self, ClipSetup};
 use crate::validate::{check_file, replay::Reference};
 use anyhow::{bail, Context, Result};
 use exporters::atomic::OutputSet;
 use exporters::FileKind;
-use report::{References, Report, Restarts, Window, WINDOW};
+use report::{References, Report, Restarts, SpanMetrics, SPAN_FRAMES};
 use std::path::{Path, PathBuf};
 
 /// What to play and write (the flags of `garmentbake rollout`, resolved).
@@ -149,7 +149,7 @@ pub fn run(request: &Request, outputs: OutputSet, feedback: &Feedback) -> Result
         _ => None,
     };
     let (per_frame, summary) = stats::of(
-        &Series::unpinned(&file.body, &file.garment, fps),
+        &ClipSetup::unpinned(&file.body, &file.garment, fps),
         &rollout.frames,
         &poses,
         &[],
@@ -231,7 +231,7 @@ pub fn run(request: &Request, outputs: OutputSet, feedback: &Feedback) -> Result
         collision_loss_after_mm: mean_mm(&rollout.collision_after),
         timing: Timing::of(&rollout.timings),
         summary,
-        windows: per_frame.chunks(WINDOW).map(Window::of).collect(),
+        spans: per_frame.chunks(SPAN_FRAMES).map(SpanMetrics::of).collect(),
         lbs_reference,
         lbs_out: r.lbs_out.clone(),
         reference: first,

@@ -55,12 +55,13 @@ impl Restarts {
     }
 }
 
-/// Frames per row of the stability table.
-pub const WINDOW: usize = 100;
+/// Frames per row of the stability table ([`SpanMetrics`]).
+pub const SPAN_FRAMES: usize = 100;
 
-/// Metrics over one span of frames.
+/// Metrics over one span of `SPAN_FRAMES` frames: a row of the stability table (the report's
+/// `windows`).
 #[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct Window {
+pub struct SpanMetrics {
     pub first_frame: usize,
     pub last_frame: usize,
     /// Mean share of garment vertices inside the body (winding number), %.
@@ -71,11 +72,11 @@ pub struct Window {
     pub max_speed: f64,
 }
 
-impl Window {
-    pub fn of(frames: &[FrameStats]) -> Window {
+impl SpanMetrics {
+    pub fn of(frames: &[FrameStats]) -> SpanMetrics {
         let n = frames.len().max(1) as f64;
         let max = |f: fn(&FrameStats) -> f64| frames.iter().map(f).fold(0.0, f64::max);
-        Window {
+        SpanMetrics {
             first_frame: frames.first().map_or(0, |f| f.frame),
             last_frame: frames.last().map_or(0, |f| f.frame),
             inside_pct: frames.iter().map(|f| f.inside_pct).sum::<f64>() / n,
@@ -100,7 +101,8 @@ pub struct Report {
     /// Our metrics on the written frames (inside the body by winding number, strain, speed).
     pub summary: Summary,
     /// The same per 100 frames: whether a long roll-out drifts or blows up.
-    pub windows: Vec<Window>,
+    #[serde(rename = "windows")]
+    pub spans: Vec<SpanMetrics>,
     /// Against the (first) reference.
     pub reference: Option<ReferenceError>,
     /// With several references: against each, and their own spread.
@@ -157,12 +159,12 @@ impl Display for Report {
             "inside the body (winding number): {:.3} % of vertices on average, worst frame {} ({} vertices); edge strain mean {:.2} %, worst {:.2} %; fastest vertex {:.2} m/s",
             s.inside.inside_pct, s.inside.worst_frame, s.inside.worst_frame_vertices, s.mean_strain_pct, s.max_strain_pct, s.max_speed
         )?;
-        if r.windows.len() > 1 {
+        if r.spans.len() > 1 {
             writeln!(
                 f,
                 "frames      inside %  strain % (mean, worst)  fastest m/s"
             )?;
-            for w in &r.windows {
+            for w in &r.spans {
                 writeln!(
                     f,
                     "{:>4}-{:<4}  {:>8.3}  {:>7.2} {:>7.2}         {:>6.2}",
