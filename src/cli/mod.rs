@@ -1,4 +1,4 @@
-//! The `garmentbake` command line: one subcommand per pipeline step.
+//! The command line: a file per subcommand; here `Execute`, dispatch, `main`, batch's `figures`.
 
 pub mod args;
 pub mod bake;

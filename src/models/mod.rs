@@ -1,6 +1,7 @@
-//! Neural garment models — PBNS (`pbns`, pose-driven) and the motion-guided dynamic model
-//! (`dynamic`: generative space and motion stage) — their inputs and the one model file that
-//! holds any of them, its kind named in the metadata.
+//! Neural garment models — PBNS (`pbns`, pose-driven; `swing`, the optional learnt swing on top
+//! of it) and the motion-guided dynamic model (`dynamic`: generative space and motion stage) —
+//! their inputs (`pose_features`), pose `coverage`, CPU skinning (`sparse_skin`) and the one
+//! model file that holds any of them (`file`), its kind named in the metadata.
 
 pub mod coverage;
 pub mod dynamic;
