@@ -1,5 +1,6 @@
-"""A plain OBJ parser's view of a garment's UVs, shared by the cache readers in tools/abc and
-tools/usd (each compares the UVs a file carries with the OBJ's own)."""
+"""A plain OBJ parser's view of a garment's UVs, and a file's UVs checked against it: shared by
+the cache readers in tools/abc and tools/usd (each compares the UVs a file carries with the
+OBJ's own)."""
 
 
 def obj_pairs(path):
@@ -20,3 +21,22 @@ def obj_pairs(path):
                     if vt[t] not in uvs:
                         uvs.append(vt[t])
     return pairs
+
+
+def compare_uvs(corners, obj):
+    """`corners`: (vertex, (u, v)) per face corner of the file, against the OBJ's pairs."""
+    worst, unmatched, covered = 0.0, 0, set()
+    for v, uv in corners:
+        options = obj.get(v, [])
+        if not options:
+            unmatched += 1
+            continue
+        d, k = min((max(abs(uv[0] - o[0]), abs(uv[1] - o[1])), k) for k, o in enumerate(options))
+        worst = max(worst, d)
+        if d > 1e-6:
+            unmatched += 1
+        else:
+            covered.add((v, k))
+    total = sum(len(o) for o in obj.values())
+    return {"corners": len(corners), "unmatched": unmatched, "uncovered": total - len(covered),
+            "obj_pairs": total, "max_uv_diff": worst}

@@ -202,13 +202,19 @@ fn a_baked_swing_replays_the_network_in_threejs_and_blender() {
 /// it reports are the training's, and the recipe's time is its setup plus 30 of its epochs.
 #[test]
 fn bench_swing_times_the_training_it_projects() {
-    let report = garmentbake_json(&[
-        "bench",
-        "swing",
-        "--from",
-        crate::bake::model().to_str().unwrap(),
-        "--motion",
-        crate::bake::s("motions/131_01.bvh"),
+    let bench = |more: &[&'static str]| {
+        let mut args = vec![
+            "bench",
+            "swing",
+            "--from",
+            crate::bake::model().to_str().unwrap(),
+            "--motion",
+            crate::bake::s("motions/131_01.bvh"),
+        ];
+        args.extend(more);
+        args
+    };
+    let report = garmentbake_json(&bench(&[
         "--fps",
         "30",
         "--epochs",
@@ -218,7 +224,7 @@ fn bench_swing_times_the_training_it_projects() {
         "--threads",
         "1",
         "--json",
-    ]);
+    ]));
     let r = &report;
     // 131_01 at 30 fps: 249 frames (docs/dynamic.md); 245 sequence starts (a 3-frame unroll
     // after two earlier frames), 16 sequences of 3 frames a step: 6 steps.
@@ -229,16 +235,7 @@ fn bench_swing_times_the_training_it_projects() {
     assert_eq!(r["recipe_epochs"], 30);
     assert!((f("recipe_s") - (f("setup_s") + 30.0 * f("epoch_s"))).abs() < 1e-6 * f("recipe_s"));
     assert!((f("frames_per_s") - 249.0 / f("epoch_s")).abs() < 1e-6 * f("frames_per_s"));
-    let output = garmentbake(&[
-        "bench",
-        "swing",
-        "--from",
-        crate::bake::model().to_str().unwrap(),
-        "--motion",
-        crate::bake::s("motions/131_01.bvh"),
-        "--epochs",
-        "0",
-    ]);
+    let output = garmentbake(&bench(&["--epochs", "0"]));
     assert_eq!(
         one_error_line(&output, &out_dir("bench_swing").join("nothing")),
         "error: --epochs must be at least 1: nothing would be timed"

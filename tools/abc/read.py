@@ -20,7 +20,7 @@ import numpy as np
 from alembic3d import Abc, AbcGeom
 
 sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parents[1]))
-from obj_uv import obj_pairs  # noqa: E402
+from obj_uv import compare_uvs, obj_pairs  # noqa: E402
 
 
 def at(schema, s):
@@ -55,25 +55,6 @@ def read_pc2(path):
     points, _start, _rate, samples = struct.unpack_from("<iffi", data, 16)
     frames = np.frombuffer(data, dtype="<f4", count=samples * points * 3, offset=32)
     return frames.reshape(samples, points, 3)
-
-
-def compare_uvs(corners, obj):
-    """`corners`: (vertex, (u, v)) per face corner of the file, against the OBJ's pairs."""
-    worst, unmatched, covered = 0.0, 0, set()
-    for v, uv in corners:
-        options = obj.get(v, [])
-        if not options:
-            unmatched += 1
-            continue
-        d, k = min((max(abs(uv[0] - o[0]), abs(uv[1] - o[1])), k) for k, o in enumerate(options))
-        worst = max(worst, d)
-        if d > 1e-6:
-            unmatched += 1
-        else:
-            covered.add((v, k))
-    total = sum(len(o) for o in obj.values())
-    return {"corners": len(corners), "unmatched": unmatched, "uncovered": total - len(covered),
-            "obj_pairs": total, "max_uv_diff": worst}
 
 
 def main(argv):

@@ -34,7 +34,7 @@ import numpy as np
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, UsdValidation
 
 sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parents[1]))
-from obj_uv import obj_pairs  # noqa: E402
+from obj_uv import compare_uvs, obj_pairs  # noqa: E402
 
 
 def validate(path):
@@ -273,23 +273,8 @@ def uvs(path, mesh_name, obj):
         corners = [(faces[i], (flat[i][0], flat[i][1])) for i in range(len(faces))]
     else:
         corners = [(v, (flat[v][0], flat[v][1])) for v in faces]
-    pairs = obj_pairs(obj)
-    worst, unmatched, covered = 0.0, 0, set()
-    for v, uv in corners:
-        options = pairs.get(v, [])
-        if not options:
-            unmatched += 1
-            continue
-        d, k = min((max(abs(uv[0] - o[0]), abs(uv[1] - o[1])), k) for k, o in enumerate(options))
-        worst = max(worst, d)
-        if d > 1e-6:
-            unmatched += 1
-        else:
-            covered.add((v, k))
-    total = sum(len(o) for o in pairs.values())
     print(json.dumps({"file": path, "interpolation": str(interpolation), "indexed": st.IsIndexed(),
-                      "corners": len(corners), "unmatched": unmatched,
-                      "uncovered": total - len(covered), "obj_pairs": total, "max_uv_diff": worst}))
+                      **compare_uvs(corners, obj_pairs(obj))}))
     return 0
 
 
