@@ -38,17 +38,18 @@ enum What {
 #[derive(clap::Args)]
 struct SwingBench {
     /// The quasi-static PBNS the swing trains on (.safetensors).
-    #[arg(long)]
+    #[arg(long, help_heading = "Inputs")]
     from: PathBuf,
     #[command(flatten)]
     clips: super::args::ClipArgs,
     /// Epochs timed.
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = 2, help_heading = "Training")]
     epochs: usize,
-    /// Swing blend shapes and bones (as `train-swing`).
-    #[arg(long, default_value_t = crate::train::swing::Settings::recipe().shapes)]
+    /// Swing blend shapes (as `train-swing --shapes`).
+    #[arg(long, default_value_t = crate::train::swing::Settings::recipe().shapes, help_heading = "Training")]
     shapes: usize,
-    #[arg(long, default_value_t = 0)]
+    /// Swing bones (as `train-swing --bones`).
+    #[arg(long, default_value_t = 0, help_heading = "Training")]
     bones: usize,
     #[command(flatten)]
     compute: ComputeArgs,
