@@ -4,13 +4,17 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-/// Temporary sibling of `path` (same directory, so the final rename is atomic).
+/// Temporary sibling of `path` (same directory, so the final rename is atomic), named per process
+/// and per call: two writers of one path (two tests or batch jobs filling a shared simulation
+/// cache) each rename their own whole file, where one shared name let the second rename fail.
 pub fn temp_path(path: &Path) -> PathBuf {
+    static CALLS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let name = path
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    path.with_file_name(format!(".{name}.partial"))
+    path.with_file_name(format!(".{name}.{}-{call}.partial", std::process::id()))
 }
 
 /// Writes `bytes` to `path` atomically; the error names the path.
@@ -391,11 +395,35 @@ mod tests {
             format!("cannot write {}: disk full", path.display())
         );
         assert_eq!(std::fs::read(&path).unwrap(), b"old");
-        assert!(!temp_path(&path).exists());
         write_atomic(&path, b"new").unwrap();
         assert_eq!(std::fs::read(&path).unwrap(), b"new");
         let names: Vec<_> = std::fs::read_dir(&dir).unwrap().collect();
         assert_eq!(names.len(), 1);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn writers_racing_for_one_path_each_land_a_whole_file() {
+        // Two tests once filled the shared simulation cache with the same entry at once; with one
+        // temporary name the slower rename found its file gone ("No such file or directory").
+        let dir = scratch("race");
+        let path = dir.join("entry.pc2");
+        let writers: Vec<_> = (0..4u8)
+            .map(|w| {
+                let path = path.clone();
+                std::thread::spawn(move || {
+                    for _ in 0..200 {
+                        write_atomic(&path, &[w; 4096]).unwrap();
+                    }
+                })
+            })
+            .collect();
+        for w in writers {
+            w.join().unwrap();
+        }
+        let bytes = std::fs::read(&path).unwrap();
+        assert!(bytes.len() == 4096 && bytes.iter().all(|&b| b == bytes[0]));
+        assert_eq!(names(&dir), ["entry.pc2"], "no temporary file left");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
