@@ -6,6 +6,7 @@ mod common;
 mod bake;
 mod batch;
 mod compare;
+mod docs;
 mod dynamic;
 mod engine;
 mod errors;
