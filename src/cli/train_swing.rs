@@ -5,6 +5,7 @@ use super::args::{
 };
 use super::Execute;
 use crate::models::file::SwingEpoch;
+use crate::models::swing::SwingIntegrator;
 use crate::train::swing::{Inputs, Settings, SwingBasis, Trainer};
 use crate::train::{fit_every, CheckpointEvery, FitOptions, Fitted};
 use anyhow::Result;
@@ -64,6 +65,11 @@ pub struct Args {
     /// smooth motions). Hidden: measured, not adopted (docs/lab/2026-12-06-isometric-swing.md).
     #[arg(long, value_enum, default_value_t = Settings::recipe().basis, hide = true)]
     pub basis: SwingBasis,
+    /// How the swing's weights are stepped: `network` (the network maps the motion, the pose and
+    /// the last two weights to the new ones) or `modal` (a learnt damped oscillator per blend
+    /// shape, the network only drives it). Hidden: under test (docs/lab/).
+    #[arg(long, value_enum, default_value_t = Settings::recipe().integrator, hide = true)]
+    pub integrator: SwingIntegrator,
     /// Hidden width of the swing network.
     #[arg(long, default_value_t = Settings::recipe().width, help_heading = "Training")]
     pub width: usize,
@@ -110,6 +116,7 @@ impl Execute for Args {
             shapes: self.shapes,
             bones: self.bones,
             basis: self.basis,
+            integrator: self.integrator,
             width: self.width,
             seed: self.seed,
             inertia: self.inertia,

@@ -22,7 +22,7 @@ use super::dynamic::{
     BodyAnchors, Dynamic, MotionEncoder, MotionShape, Space, SpaceShape, UvRaster,
 };
 use super::pbns::{flat, Pbns, PbnsShape};
-use super::swing::{Swing, SwingShape};
+use super::swing::{Modes, Swing, SwingIntegrator, SwingShape};
 use super::{Model, ModelKind};
 use crate::body::Body;
 use crate::fabric::Fabric;
@@ -889,12 +889,21 @@ fn load_swing(t: &Tensors, info: &SwingInfo) -> Result<Swing> {
         ));
     }
     let m = shape.motion_inputs();
+    let s = shape.shapes;
+    let modes = match shape.integrator {
+        SwingIntegrator::Network => None,
+        SwingIntegrator::Modal => Some(Modes {
+            stiffness: t.shaped("swing.stiffness", &[s, s])?,
+            damping: t.shaped("swing.damping", &[s, s])?,
+        }),
+    };
     let swing = Swing {
         basis: t.shaped("swing.basis", &[shape.shapes, 3 * shape.vertices])?,
         input_mean: t.shaped("swing.input_mean", &[m])?,
         input_scale: t.shaped("swing.input_scale", &[m])?,
         mlp,
         shape,
+        modes,
     };
     swing.check().map_err(|e| t.fail(e.to_string()))?;
     Ok(swing)

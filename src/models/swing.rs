@@ -16,6 +16,28 @@ use nalgebra::{UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 use tch::{Device, Kind, Tensor};
 
+/// How a swing's weights follow from one frame to the next.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum SwingIntegrator {
+    /// The network maps the motion history, the pose and the last two weights to the new ones.
+    #[default]
+    Network,
+    /// A damped oscillator over the blend shapes, stepped implicitly:
+    /// `(I + Δt·C + Δt²·K)·Y_t = (2I + Δt·C)·Y_{t−1} − Y_{t−2} + F_t`, with a learnt stiffness
+    /// `K` and damping `C` (symmetric, positive definite) and the network giving only the drive
+    /// `F_t` from the motion and the pose. Momentum is carried from the first step (a network
+    /// must learn to carry it, and from rest it never started), and the recurrence is stable
+    /// whatever the drive, so a clip of any length plays without blowing up.
+    Modal,
+}
+
+impl SwingIntegrator {
+    fn is_network(&self) -> bool {
+        *self == SwingIntegrator::Network
+    }
+}
+
 /// Sizes and inputs of the swing network.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SwingShape {
@@ -41,6 +63,9 @@ pub struct SwingShape {
     pub vertices: usize,
     /// The rate the recurrence steps at (frames per second).
     pub fps: f32,
+    /// How the weights are stepped (files without it: `Network`).
+    #[serde(default, skip_serializing_if = "SwingIntegrator::is_network")]
+    pub integrator: SwingIntegrator,
 }
 
 impl SwingShape {
@@ -55,9 +80,58 @@ impl SwingShape {
         self.shapes + 3 * self.bones.len()
     }
 
-    /// All network inputs: motion history, pose features, the last two outputs.
+    /// All network inputs: motion history, pose features, and (stepped by the network) the
+    /// last two outputs.
     pub fn inputs(&self) -> usize {
-        self.motion_inputs() + self.pose_features + 2 * self.outputs()
+        let state = match self.integrator {
+            SwingIntegrator::Network => 2 * self.outputs(),
+            SwingIntegrator::Modal => 0,
+        };
+        self.motion_inputs() + self.pose_features + state
+    }
+}
+
+/// The modal integrator's matrices: `K = A·Aᵀ + k₀·I` (1/s²) and `C = B·Bᵀ` (1/s), so both stay
+/// symmetric and positive whatever training does to `A` and `B`.
+pub struct Modes {
+    pub stiffness: Tensor,
+    pub damping: Tensor,
+}
+
+/// The stiffness floor `k₀`: a 0.2 Hz oscillation, so no blend shape drifts without a pull back.
+const STIFFNESS_FLOOR: f64 =
+    (2.0 * std::f64::consts::PI * 0.2) * (2.0 * std::f64::consts::PI * 0.2);
+
+impl Modes {
+    /// Every shape a 1 Hz oscillator damped at 10 % of critical (a skirt swings about once a
+    /// second); training moves both.
+    pub fn new(shapes: usize, device: Device) -> Modes {
+        let omega = 2.0 * std::f64::consts::PI;
+        let eye = Tensor::eye(shapes as i64, (Kind::Float, device));
+        Modes {
+            stiffness: &eye * (omega * omega - STIFFNESS_FLOOR).sqrt(),
+            damping: eye * (2.0 * 0.1 * omega).sqrt(),
+        }
+    }
+
+    /// Each shape its own oscillator: stiffness `λ_k` (1/s², at least the floor) damped at 10 %
+    /// of critical, for weights whose kinetic energy is `½|Ẏ|²`.
+    pub fn set_frequencies(&mut self, lambda: &Tensor) {
+        let k = lambda.clamp_min(STIFFNESS_FLOOR);
+        let stiffness = (&k - STIFFNESS_FLOOR).sqrt().diag(0);
+        let damping = (k.sqrt() * (2.0 * 0.1)).sqrt().diag(0);
+        self.stiffness = stiffness.set_requires_grad(self.stiffness.requires_grad());
+        self.damping = damping.set_requires_grad(self.damping.requires_grad());
+    }
+
+    /// The step's matrices for time step `dt`: `(I + Δt·C + Δt²·K)⁻¹` and `2I + Δt·C`.
+    fn step_matrices(&self, dt: f64) -> (Tensor, Tensor) {
+        let s = self.stiffness.size()[0];
+        let eye = Tensor::eye(s, (Kind::Float, self.stiffness.device()));
+        let k = self.stiffness.matmul(&self.stiffness.tr()) + &eye * STIFFNESS_FLOOR;
+        let c = self.damping.matmul(&self.damping.tr());
+        let lhs = &eye + &c * dt + k * (dt * dt);
+        (lhs.inverse(), eye * 2.0 + c * dt)
     }
 }
 
@@ -70,6 +144,8 @@ pub struct Swing {
     /// Normalisation of the motion inputs (from the training frames) `[M]`.
     pub input_mean: Tensor,
     pub input_scale: Tensor,
+    /// Stiffness and damping of the modal integrator (`None` for the network integrator).
+    pub modes: Option<Modes>,
 }
 
 /// Which gravity the rig lives in (glTF bodies are Y-up).
@@ -99,12 +175,15 @@ impl Swing {
         // One centimetre per unit weight spread over the garment: the weights start near 1.
         let scale = 0.01 / (shape.vertices as f64).sqrt();
         let basis = Tensor::randn([shape.shapes as i64, 3 * shape.vertices as i64], opts) * scale;
+        let modes =
+            (shape.integrator == SwingIntegrator::Modal).then(|| Modes::new(shape.shapes, device));
         Swing {
             shape,
             mlp,
             basis,
             input_mean,
             input_scale,
+            modes,
         }
     }
 
@@ -116,6 +195,10 @@ impl Swing {
             out.push((format!("swing.mlp.{i}.bias"), b));
         }
         out.push(("swing.basis".to_string(), &self.basis));
+        if let Some(m) = &self.modes {
+            out.push(("swing.stiffness".to_string(), &m.stiffness));
+            out.push(("swing.damping".to_string(), &m.damping));
+        }
         out
     }
 
@@ -133,6 +216,10 @@ impl Swing {
             *b = b.set_requires_grad(true);
         }
         self.basis = self.basis.set_requires_grad(true);
+        if let Some(m) = &mut self.modes {
+            m.stiffness = m.stiffness.set_requires_grad(true);
+            m.damping = m.damping.set_requires_grad(true);
+        }
     }
 
     /// Normalised motion inputs `[F, M]` from raw ones.
@@ -143,7 +230,18 @@ impl Swing {
     /// One step for a batch: `motion` normalised `[B, M]`, `pose` `[B, P]`, the last two swing
     /// weights `[B, S]` each → the new weights `[B, S]`.
     pub fn step(&self, motion: &Tensor, pose: &Tensor, last: &Tensor, before: &Tensor) -> Tensor {
-        let mut x = Tensor::cat(&[motion, pose, last, before], 1);
+        match &self.modes {
+            None => self.mlp_forward(Tensor::cat(&[motion, pose, last, before], 1)),
+            Some(modes) => {
+                let drive = self.mlp_forward(Tensor::cat(&[motion, pose], 1));
+                let (inverse, carry) = modes.step_matrices(1.0 / f64::from(self.shape.fps));
+                // Rows are frames: `Y_t = (carry·Y_{t−1} − Y_{t−2} + F)·lhs⁻ᵀ` (both symmetric).
+                (last.matmul(&carry) - before + drive).matmul(&inverse)
+            }
+        }
+    }
+
+    fn mlp_forward(&self, mut x: Tensor) -> Tensor {
         let n = self.mlp.len();
         for (i, (w, b)) in self.mlp.iter().enumerate() {
             x = b.addmm(&x, w);
@@ -255,6 +353,17 @@ impl Swing {
                 s.shapes
             );
         }
+        let modal = s.integrator == SwingIntegrator::Modal;
+        if modal != self.modes.is_some() {
+            bail!(
+                "swing: the {:?} integrator with modes {}",
+                s.integrator,
+                self.modes.is_some()
+            );
+        }
+        if modal && !s.bones.is_empty() {
+            bail!("swing: the modal integrator steps blend shapes only, not bones");
+        }
         Ok(())
     }
 }
@@ -357,6 +466,7 @@ mod tests {
             pivots: vec![],
             vertices: 3,
             fps: 30.0,
+            integrator: SwingIntegrator::Network,
         }
     }
 
@@ -466,5 +576,74 @@ mod tests {
         );
         let y: Vec<f32> = Vec::try_from(y.view([-1])).unwrap();
         assert_eq!(y, [1.0, 2.0, 3.0, 4.0]);
+    }
+
+    /// The modal integrator is a damped oscillator: released from a held weight with no drive it
+    /// swings through zero about a quarter second later (a 1 Hz shape), comes back smaller, and
+    /// never exceeds where it started; under a constant drive it settles at the static deflection
+    /// `F / (Δt²·K)` instead of drifting.
+    #[test]
+    fn a_modal_swing_oscillates_decays_and_settles_under_a_steady_drive() {
+        let shape = SwingShape {
+            layers: 0,
+            shapes: 1,
+            integrator: SwingIntegrator::Modal,
+            ..shape(vec![0])
+        };
+        let m = shape.motion_inputs() as i64;
+        let mut swing = Swing::new(
+            shape.clone(),
+            Tensor::zeros([m], (Kind::Float, Device::Cpu)),
+            Tensor::ones([m], (Kind::Float, Device::Cpu)),
+            Device::Cpu,
+        );
+        let inputs = shape.inputs() as i64;
+        assert_eq!(inputs, m + 6, "no state among the network's inputs");
+        let drive = |swing: &mut Swing, f: f32| {
+            swing.mlp = vec![(
+                Tensor::zeros([inputs, 1], (Kind::Float, Device::Cpu)),
+                Tensor::from_slice(&[f]),
+            )];
+        };
+        let run = |swing: &Swing, start: f32, frames: usize| -> Vec<f32> {
+            let zero = |n: i64| Tensor::zeros([1, n], (Kind::Float, Device::Cpu));
+            let (mut last, mut before) = (zero(1) + f64::from(start), zero(1) + f64::from(start));
+            (0..frames)
+                .map(|_| {
+                    let y = swing.step(&zero(m), &zero(6), &last, &before);
+                    before = std::mem::replace(&mut last, y);
+                    f32::try_from(last.view([-1]).get(0)).unwrap()
+                })
+                .collect()
+        };
+        drive(&mut swing, 0.0);
+        let y = run(&swing, 1.0, 300);
+        let crossing = y.iter().position(|&v| v < 0.0).unwrap();
+        assert!(
+            (6..=9).contains(&crossing),
+            "first zero crossing at frame {crossing}: {:?}",
+            &y[..12]
+        );
+        let trough = y[..30].iter().copied().fold(f32::INFINITY, f32::min);
+        let back = y[20..40].iter().copied().fold(f32::NEG_INFINITY, f32::max);
+        assert!(
+            trough < -0.2 && back > 0.05 && back < 0.9,
+            "trough {trough}, back {back}"
+        );
+        assert!(
+            y.iter().all(|v| v.abs() <= 1.0) && y[299].abs() < 1e-3,
+            "{:?}",
+            &y[290..]
+        );
+        drive(&mut swing, 0.1);
+        let y = run(&swing, 0.0, 600);
+        let k = (2.0 * std::f32::consts::PI).powi(2);
+        let settled = 0.1 * 30.0 * 30.0 / k;
+        assert!(
+            (y[599] - settled).abs() < 1e-3 * settled,
+            "{} vs {settled}",
+            y[599]
+        );
+        assert!(y.iter().all(|v| v.is_finite() && *v < 2.0 * settled));
     }
 }

@@ -16,7 +16,7 @@ use super::{Blowup, Training};
 use crate::models::file::{KindInfo, LossTerms, ModelFile, SwingEpoch, SwingInfo, SwingTraining};
 use crate::models::pbns::flat;
 use crate::models::pose_features::{tensor_points, PER_JOINT};
-use crate::models::swing::{self, Swing, SwingShape};
+use crate::models::swing::{self, Swing, SwingIntegrator, SwingShape};
 use crate::models::{Model, Pbns, PREDICT_CHUNK};
 use crate::rig::SkelAnimation;
 use anyhow::{bail, Context, Result};
@@ -55,6 +55,8 @@ pub struct Settings {
     pub bones: usize,
     /// Where the swing's blend shapes start (`SwingBasis`).
     pub basis: SwingBasis,
+    /// How the weights are stepped (`models::swing::SwingIntegrator`).
+    pub integrator: SwingIntegrator,
     pub lags: Vec<usize>,
     pub fps: f32,
     /// Weight of the inertia term (1: physical; 0 turns the dynamics off, for ablations).
@@ -81,6 +83,7 @@ impl Settings {
             shapes: 32,
             bones: 0,
             basis: SwingBasis::Turns,
+            integrator: SwingIntegrator::Network,
             lags: vec![0, 1, 2, 4, 8],
             fps: 30.0,
             // The fabric's own density leaves the sample skirt all but still (docs/swing.md).
@@ -168,6 +171,11 @@ impl Trainer {
         if settings.fps <= 0.0 {
             bail!("--fps must be positive");
         }
+        if settings.integrator == SwingIntegrator::Modal
+            && (settings.bones > 0 || settings.shapes == 0)
+        {
+            bail!("--integrator modal steps blend shapes only: give --shapes and --bones 0");
+        }
         tch::manual_seed(settings.seed as i64);
         let Inputs {
             mut model,
@@ -203,6 +211,7 @@ impl Trainer {
             pivots,
             vertices: network.shape.vertices,
             fps: settings.fps,
+            integrator: settings.integrator,
         };
         let mut ranges = Vec::new();
         let mut locals = Vec::new();
@@ -301,7 +310,7 @@ impl Trainer {
             KindInfo::Dynamic(_) => unreachable!("checked above"),
         }
         model.extra.clear();
-        Ok(Trainer {
+        let mut trainer = Trainer {
             dt: 1.0 / settings.fps as f64,
             rng: Rng::new(settings.seed),
             settings,
@@ -316,7 +325,90 @@ impl Trainer {
             states,
             correspondences,
             adam,
-        })
+        };
+        if trainer.settings.integrator == SwingIntegrator::Modal {
+            trainer.start_modes();
+        }
+        Ok(trainer)
+    }
+
+    /// The modal integrator's start: the swing's blend shapes turned into the garment's own
+    /// vibration modes about the PBNS state. The potential's Hessian and the lumped mass are
+    /// projected onto the shapes — `H_B` from central differences of the potential's gradient
+    /// (1 mm RMS each way) at 8 training frames, `M_B = E·diag(m)·Eᵀ` — and the shapes replaced by
+    /// the solutions of `H_B·v = λ·M_B·v` scaled to unit mass. The weights' kinetic energy is
+    /// then `½|Ẏ|²` as the step assumes, the stiffness `diag(λ)`, and every mode starts at its
+    /// physical frequency `√λ` (damped at 10 % of critical); the drive starts at zero, so the
+    /// untrained swing is the PBNS garment, still.
+    fn start_modes(&mut self) {
+        let device = self.settings.device;
+        let basis = self.swing().basis.detach().to_kind(Kind::Double);
+        let s = basis.size()[0];
+        let n = self.network().shape.vertices as i64;
+        let frames = self.states.size()[0];
+        let rms = basis.square().mean_dim(1, false, Kind::Double).sqrt();
+        let step = (rms.reciprocal() * 1e-3).to_kind(Kind::Float);
+        let eye = Tensor::eye(s, (Kind::Float, device));
+        let signed = Tensor::cat(&[&eye, &(-&eye)], 0) * step.unsqueeze(0);
+        let samples = 8i64.min(frames);
+        let fabric = self.file.info.fabric.clone();
+        let mut hessian = Tensor::zeros([s, s], (Kind::Double, device));
+        for i in 0..samples {
+            let frame = (2 * i + 1) * frames / (2 * samples);
+            let idx = Tensor::full([2 * s], frame, (Kind::Int64, device));
+            let y = signed.detach().set_requires_grad(true);
+            let (x, displacement) = self.garment(&idx, &y);
+            let (body_points, body_normals) = self.correspondences.resolve(&idx, &x);
+            let total = losses::potential(
+                &self.cloth,
+                &fabric,
+                &x,
+                &displacement,
+                &body_points,
+                &body_normals,
+            )
+            .total()
+                * (2 * s) as f64;
+            let grad =
+                Tensor::run_backward(&[&total], &[&y], false, false)[0].to_kind(Kind::Double);
+            let column = (grad.narrow(0, 0, s) - grad.narrow(0, s, s))
+                / (step.to_kind(Kind::Double).unsqueeze(1) * 2.0);
+            hessian += column.tr() / samples as f64;
+        }
+        let hessian = (&hessian + hessian.tr()) * 0.5;
+        let mass = Tensor::from_slice(&self.cloth.arrays.mass)
+            .to_kind(Kind::Double)
+            .to_device(device);
+        let weighted = basis.view([s, n, 3]) * mass.sqrt().view([1, n, 1]);
+        let weighted = weighted.view([s, 3 * n]);
+        let mass_b = weighted.matmul(&weighted.tr());
+        let l_inv = mass_b.linalg_cholesky(false).inverse();
+        let (lambda, v) = l_inv.matmul(&hessian).matmul(&l_inv.tr()).linalg_eigh("L");
+        let modes = v.tr().matmul(&l_inv).matmul(&basis).to_kind(Kind::Float);
+        let lambda = lambda.to_kind(Kind::Float);
+        let hz: Vec<f64> =
+            Vec::try_from(lambda.clamp_min(0.0).sqrt() / (2.0 * std::f64::consts::PI))
+                .expect("float tensor");
+        crate::progress::note(&format!(
+            "modal start: {s} modes, {:.2}–{:.2} Hz (median {:.2} Hz)",
+            hz.first().copied().unwrap_or(0.0),
+            hz.last().copied().unwrap_or(0.0),
+            hz[hz.len() / 2]
+        ));
+        let swing = self.swing_mut();
+        swing.basis = modes.set_requires_grad(true);
+        let m = swing.modes.as_mut().expect("a modal swing has modes");
+        m.set_frequencies(&lambda);
+        let (w, b) = swing.mlp.last_mut().expect("a network has a last layer");
+        let _ = tch::no_grad(|| (w.zero_(), b.zero_()));
+        self.adam = Adam::new(&self.swing().parameters());
+    }
+
+    fn swing_mut(&mut self) -> &mut Swing {
+        match &mut self.file.model {
+            Model::Pbns(p) => p.swing.as_mut().expect("the trainer installed a swing"),
+            Model::Dynamic(_) => unreachable!("a swing trainer holds a PBNS"),
+        }
     }
 
     fn network(&self) -> &Pbns {
