@@ -352,30 +352,35 @@ impl Trainer {
         let signed = Tensor::cat(&[&eye, &(-&eye)], 0) * step.unsqueeze(0);
         let samples = 8i64.min(frames);
         let fabric = self.file.info.fabric.clone();
-        let mut hessian = Tensor::zeros([s, s], (Kind::Double, device));
+        // One Hessian per term of the potential (edge, bend, collision, gravity, pin), to say
+        // which of them holds the slowest mode.
+        let terms = losses::TERM_NAMES.len() as i64;
+        let per_term = Tensor::zeros([terms, s, s], (Kind::Double, device));
         for i in 0..samples {
             let frame = (2 * i + 1) * frames / (2 * samples);
             let idx = Tensor::full([2 * s], frame, (Kind::Int64, device));
             let y = signed.detach().set_requires_grad(true);
             let (x, displacement) = self.garment(&idx, &y);
             let (body_points, body_normals) = self.correspondences.resolve(&idx, &x);
-            let total = losses::potential(
+            let potential = losses::potential(
                 &self.cloth,
                 &fabric,
                 &x,
                 &displacement,
                 &body_points,
                 &body_normals,
-            )
-            .total()
-                * (2 * s) as f64;
-            let grad =
-                Tensor::run_backward(&[&total], &[&y], false, false)[0].to_kind(Kind::Double);
-            let column = (grad.narrow(0, 0, s) - grad.narrow(0, s, s))
-                / (step.to_kind(Kind::Double).unsqueeze(1) * 2.0);
-            hessian += column.tr() / samples as f64;
+            );
+            for (t, term) in potential.weighted.iter().enumerate() {
+                let grad = Tensor::run_backward(&[&(term * (2 * s) as f64)], &[&y], true, false)[0]
+                    .to_kind(Kind::Double);
+                let column = (grad.narrow(0, 0, s) - grad.narrow(0, s, s))
+                    / (step.to_kind(Kind::Double).unsqueeze(1) * 2.0);
+                let mut slot = per_term.get(t as i64);
+                slot += column.tr() / samples as f64;
+            }
         }
-        let hessian = (&hessian + hessian.tr()) * 0.5;
+        let per_term = (&per_term + per_term.transpose(1, 2)) * 0.5;
+        let hessian = per_term.sum_dim_intlist(0, false, Kind::Double);
         let mass = Tensor::from_slice(&self.cloth.arrays.mass)
             .to_kind(Kind::Double)
             .to_device(device);
@@ -384,16 +389,32 @@ impl Trainer {
         let mass_b = weighted.matmul(&weighted.tr());
         let l_inv = mass_b.linalg_cholesky(false).inverse();
         let (lambda, v) = l_inv.matmul(&hessian).matmul(&l_inv.tr()).linalg_eigh("L");
-        let modes = v.tr().matmul(&l_inv).matmul(&basis).to_kind(Kind::Float);
+        let coefficients = v.tr().matmul(&l_inv);
+        let modes = coefficients.matmul(&basis).to_kind(Kind::Float);
+        let slowest = coefficients.get(0);
+        let share: Vec<f64> = Vec::try_from(
+            per_term
+                .matmul(&slowest.view([1, s, 1]))
+                .squeeze_dim(-1)
+                .matmul(&slowest),
+        )
+        .expect("double tensor");
+        let whole: f64 = share.iter().sum();
         let lambda = lambda.to_kind(Kind::Float);
         let hz: Vec<f64> =
             Vec::try_from(lambda.clamp_min(0.0).sqrt() / (2.0 * std::f64::consts::PI))
                 .expect("float tensor");
+        let held: Vec<String> = losses::TERM_NAMES
+            .iter()
+            .zip(&share)
+            .map(|(name, v)| format!("{name} {:.0} %", 100.0 * v / whole))
+            .collect();
         crate::progress::note(&format!(
-            "modal start: {s} modes, {:.2}–{:.2} Hz (median {:.2} Hz)",
+            "modal start: {s} modes, {:.2}–{:.2} Hz (median {:.2} Hz); the slowest held by {}",
             hz.first().copied().unwrap_or(0.0),
             hz.last().copied().unwrap_or(0.0),
-            hz[hz.len() / 2]
+            hz[hz.len() / 2],
+            held.join(", ")
         ));
         let swing = self.swing_mut();
         swing.basis = modes.set_requires_grad(true);
