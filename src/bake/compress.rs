@@ -2,8 +2,8 @@
 //!
 //! The network adds `O_f = Σ_k X_fk D_k` to the rest mesh at frame f. Over the baked clips these
 //! offsets span far fewer than K directions, so we keep the leading singular vectors of the
-//! stacked offsets `O = X D` (frames × 3N). `D` is tall (3N × K after transposing), so the SVD is
-//! taken of the small `X Rᵀ` where `Dᵀ = Q R` (thin QR): `O = U Σ (Q V)ᵀ`.
+//! stacked offsets `O = X D` (frames × 3N). `D` is wide (K × 3N), so the decomposition works on
+//! K × K Gram matrices only ([`spectrum_of_product`]).
 
 use anyhow::{bail, Result};
 use exporters::asset::SHORT_STEPS;
@@ -61,46 +61,142 @@ pub struct Compressed {
 
 /// Singular directions of the used offsets, strongest first, with the frame coefficients.
 pub struct Spectrum {
-    directions: DMatrix<f64>,
+    directions: Directions,
     coefficients: DMatrix<f64>,
     pub singular_values: Vec<f64>,
 }
 
+/// Where a spectrum's directions (3N each) come from.
+enum Directions {
+    /// Column c is direction c (3N × rank).
+    Explicit(DMatrix<f64>),
+    /// Direction c is `basisᵀ · mix[:, c]` (`basis` K × 3N, `mix` K × rank, f64), then past the
+    /// rank the rows of `pad` (f32) scaled to unit length: formed only for the directions kept.
+    Mixed {
+        basis: tch::Tensor,
+        mix: tch::Tensor,
+        pad: tch::Tensor,
+    },
+}
+
+/// [`spectrum_of_product`] of the used offsets as f64 tensors.
 pub fn spectrum(used: &UsedOffsets) -> Spectrum {
-    use tch::{Kind, Tensor};
+    use tch::Tensor;
     let k = used.basis.len();
     let n3 = used.basis.first().map_or(0, |b| b.len() * 3);
     let frames = used.coefficients.len();
-    if k == 0 || n3 == 0 || frames == 0 {
+    let d: Vec<f32> = used.basis.iter().flatten().flatten().copied().collect();
+    let x: Vec<f32> = used.coefficients.iter().flatten().copied().collect();
+    spectrum_of_product(
+        &Tensor::from_slice(&x).view([frames as i64, k as i64]),
+        &Tensor::from_slice(&d).view([k as i64, n3 as i64]),
+    )
+}
+
+/// Singular directions of the offsets `O = X D` (`x` frames × K coefficients, `d` the K × 3N
+/// basis), computed in f64 through two small Gram matrices and libtorch's symmetric
+/// eigensolver, without a factorisation of the tall `Dᵀ` (its QR was most of the bake's time,
+/// `bench bake`). Coefficients that are 0 on every frame (an MLP unit whose ReLU never fires)
+/// add nothing to `O`: their rows of `D` are left out. Of the rest (`X_a`, `D_a`),
+/// `D_a D_aᵀ = U Λ Uᵀ` (eigenvalues above 1e-12 of the largest: D_a's rank r), so `O = M Qᵀ`
+/// with `M = X_a U Λ^½` (frames × r) and `Q = D_aᵀ U Λ^-½` orthonormal; `Mᵀ M = V Σ² Vᵀ` gives
+/// the coefficients `C = M V = U_O Σ` and the directions `Q V`, formed only for the directions
+/// kept ([`Spectrum::leading`]). Squaring costs accuracy only in directions weaker than about
+/// 1e-7 of the strongest, under the rank a bake counts (1e-6). Past the r directions of `D_a`
+/// come the unused units' own basis vectors (unit length, weight 0), as the QR's directions past
+/// the offsets' rank had (nearly) 0 weight: min(frames, r + unused units) directions in all,
+/// min(frames, K) as the QR gave when `D` has full rank (a trained basis does).
+pub fn spectrum_of_product(x: &tch::Tensor, d: &tch::Tensor) -> Spectrum {
+    use tch::{Kind, Tensor};
+    let (frames, k, n3) = (x.size()[0], d.size()[0], d.size()[1]);
+    if x.numel() == 0 || d.numel() == 0 {
         return Spectrum {
-            directions: DMatrix::zeros(n3, 0),
-            coefficients: DMatrix::zeros(frames, 0),
+            directions: Directions::Explicit(DMatrix::zeros(n3 as usize, 0)),
+            coefficients: DMatrix::zeros(frames as usize, 0),
             singular_values: Vec::new(),
         };
     }
-    // libtorch's LAPACK QR and SVD in f64 (nalgebra's unblocked QR of the tall D took seconds
-    // on a 256-wide basis: the bake's hot spot, `bench bake`).
-    let d: Vec<f32> = used.basis.iter().flatten().flatten().copied().collect();
-    let d = Tensor::from_slice(&d)
-        .view([k as i64, n3 as i64])
-        .to_kind(Kind::Double);
-    let (q, r) = Tensor::linalg_qr(&d.tr(), "reduced");
-    let x: Vec<f32> = used.coefficients.iter().flatten().copied().collect();
-    let x = Tensor::from_slice(&x)
-        .view([frames as i64, k as i64])
-        .to_kind(Kind::Double);
-    // O = X D = (X Rᵀ) Qᵀ = U Σ Vᵀ Qᵀ: directions Q V, coefficients U Σ (singular values
-    // come sorted, largest first).
-    let (u, sv, v) = x.matmul(&r.tr()).svd(true, true);
-    let directions = q.matmul(&v);
-    let coefficients = u * sv.unsqueeze(0);
     let to_vec = |t: &Tensor| Vec::<f64>::try_from(&t.contiguous().view([-1])).expect("f64");
-    let m = sv.size()[0] as usize;
+    let (x, d) = (x.to_device(tch::Device::Cpu), d.to_device(tch::Device::Cpu));
+    let active = active_columns(&x);
+    let idle: Vec<i64> = (0..k).filter(|i| !active.contains(i)).collect();
+    let x = x
+        .index_select(1, &Tensor::from_slice(&active))
+        .to_kind(Kind::Double);
+    let d_active = d
+        .index_select(0, &Tensor::from_slice(&active))
+        .to_kind(Kind::Double);
+    // Eigenpairs of a symmetric matrix, strongest first: those above `floor` × the largest
+    // (every one without a floor), at most `most`.
+    let leading = |m: &Tensor, floor: Option<f64>, most: i64| {
+        let (values, vectors) = m.linalg_eigh("L");
+        let values = to_vec(&values);
+        let top = values.iter().copied().fold(0.0, f64::max);
+        let keep: Vec<i64> = (0..values.len())
+            .rev()
+            .filter(|&i| floor.is_none_or(|f| values[i] > f * top))
+            .take(most.max(0) as usize)
+            .map(|i| i as i64)
+            .collect();
+        let kept: Vec<f64> = keep.iter().map(|&i| values[i as usize].max(0.0)).collect();
+        (kept, vectors.index_select(1, &Tensor::from_slice(&keep)))
+    };
+    let (sigma2, coefficients, mix) = if active.is_empty() {
+        let none = Tensor::zeros([0, 0], (Kind::Double, tch::Device::Cpu));
+        (
+            Vec::new(),
+            Tensor::zeros([frames, 0], (Kind::Double, tch::Device::Cpu)),
+            none,
+        )
+    } else {
+        let (lambda, u) = leading(&d_active.matmul(&d_active.tr()), Some(1e-12), i64::MAX);
+        let root = Tensor::from_slice(&lambda.iter().map(|l| l.sqrt()).collect::<Vec<_>>());
+        let m = x.matmul(&u) * root.unsqueeze(0);
+        let (sigma2, v) = leading(&m.tr().matmul(&m), None, frames);
+        (sigma2, m.matmul(&v), (u / root.unsqueeze(0)).matmul(&v))
+    };
+    let rank = sigma2.len();
+    let pad: Vec<i64> = idle
+        .iter()
+        .copied()
+        .take((frames.min(k) as usize).saturating_sub(rank))
+        .collect();
+    let count = rank + pad.len();
+    let c = to_vec(&coefficients);
+    let coefficients = DMatrix::from_fn(frames as usize, count, |f, j| {
+        if j < rank {
+            c[f * rank + j]
+        } else {
+            0.0
+        }
+    });
     Spectrum {
-        directions: DMatrix::from_row_slice(n3, m, &to_vec(&directions)),
-        coefficients: DMatrix::from_row_slice(frames, m, &to_vec(&coefficients)),
-        singular_values: to_vec(&sv),
+        directions: Directions::Mixed {
+            basis: d_active,
+            mix,
+            pad: d.index_select(0, &Tensor::from_slice(&pad)),
+        },
+        coefficients,
+        singular_values: sigma2
+            .iter()
+            .map(|s| s.sqrt())
+            .chain(std::iter::repeat_n(0.0, pad.len()))
+            .collect(),
     }
+}
+
+/// The columns of `x` (frames × K coefficients) that are not 0 on every frame, in order.
+pub fn active_columns(x: &tch::Tensor) -> Vec<i64> {
+    let largest: Vec<f32> = Vec::try_from(
+        &x.abs()
+            .amax([0].as_slice(), false)
+            .to_device(tch::Device::Cpu)
+            .to_kind(tch::Kind::Float),
+    )
+    .expect("f32");
+    (0..largest.len() as i64)
+        .filter(|&i| largest[i as usize] != 0.0)
+        .collect()
 }
 
 /// Singular directions of explicit offsets (3N × frames): used when the offsets are not a
@@ -134,7 +230,7 @@ pub fn spectrum_of(offsets: &DMatrix<f32>) -> Spectrum {
     let directions = DMatrix::from_fn(rows, k, |r, c| v[r * k + c]);
     let coefficients = DMatrix::from_fn(cols, k, |f, c| u[f * k + c] * sv[c]);
     Spectrum {
-        directions,
+        directions: Directions::Explicit(directions),
         coefficients,
         singular_values: sv,
     }
@@ -162,14 +258,47 @@ impl Spectrum {
     /// ([`Spectrum::truncate`] without the errors, which need the offsets themselves).
     pub fn leading(&self, count: usize) -> (Vec<Vec<[f32; 3]>>, Vec<Vec<f32>>) {
         let count = count.min(self.rank());
-        let n = self.directions.nrows() / 3;
-        let targets = (0..count)
-            .map(|c| {
-                (0..n)
-                    .map(|v| [0, 1, 2].map(|a| self.directions[(3 * v + a, c)] as f32))
+        let targets = match &self.directions {
+            Directions::Explicit(directions) => {
+                let n = directions.nrows() / 3;
+                (0..count)
+                    .map(|c| {
+                        (0..n)
+                            .map(|v| [0, 1, 2].map(|a| directions[(3 * v + a, c)] as f32))
+                            .collect()
+                    })
+                    .collect::<Vec<Vec<[f32; 3]>>>()
+            }
+            Directions::Mixed { basis, mix, pad } => {
+                let n3 = basis.size()[1] as usize;
+                let mixed = (count as i64).min(mix.size()[1]);
+                let t = mix
+                    .narrow(1, 0, mixed)
+                    .tr()
+                    .matmul(basis)
+                    .to_kind(tch::Kind::Float)
+                    .contiguous()
+                    .view([-1]);
+                let t = Vec::<f32>::try_from(&t).expect("f32 targets");
+                let padding = pad
+                    .narrow(0, 0, count as i64 - mixed)
+                    .contiguous()
+                    .view([-1]);
+                let padding = Vec::<f32>::try_from(&padding).expect("f32 basis rows");
+                let unit = |row: &[f32]| {
+                    let length = row.iter().map(|&v| (v as f64).powi(2)).sum::<f64>().sqrt();
+                    let scale = if length > 0.0 { 1.0 / length } else { 0.0 };
+                    row.iter()
+                        .map(|&v| (v as f64 * scale) as f32)
+                        .collect::<Vec<f32>>()
+                };
+                t.chunks_exact(n3.max(1))
+                    .map(<[f32]>::to_vec)
+                    .chain(padding.chunks_exact(n3.max(1)).map(unit))
+                    .map(|c| c.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect())
                     .collect()
-            })
-            .collect::<Vec<Vec<[f32; 3]>>>();
+            }
+        };
         let weights: Vec<Vec<f32>> = (0..self.coefficients.nrows())
             .map(|f| {
                 (0..count)
@@ -370,6 +499,46 @@ mod tests {
             })
             .collect();
         (basis, coefficients)
+    }
+
+    #[test]
+    fn a_unit_that_never_fires_pads_the_count_with_zero_weights() {
+        // The fixture's coefficients with two more components whose coefficient is 0 on every
+        // frame (a ReLU unit that never fires): the rank is still 2, the offsets still exact
+        // with 2 directions, and past them come the unused units' own vectors, unit-length with
+        // weight 0: 2 + 2 here, where the fixture's 5 used components span only 2 directions;
+        // min(frames, K), as the QR of the whole basis gave, when they span 5 (a trained basis).
+        let (mut basis, mut coefficients) = fixture();
+        basis.push(basis[0].iter().map(|p| [p[2], p[0], 0.5]).collect());
+        basis.push(basis[1].iter().map(|p| [p[1], -0.2, p[0]]).collect());
+        coefficients.iter_mut().for_each(|c| c.extend([0.0, 0.0]));
+        let used = UsedOffsets {
+            basis: &basis,
+            coefficients: &coefficients,
+        };
+        let reference = offset_matrix(&basis, &coefficients);
+        let s = spectrum(&used);
+        assert_eq!(s.rank(), 4, "{:?}", s.singular_values);
+        assert!(s.singular_values[2] < 1e-6 * s.singular_values[0]);
+        let two = s.truncate(&reference, 2);
+        assert!(two.max_error < 1e-6, "{}", two.max_error);
+        let (targets, weights) = s.leading(10);
+        assert_eq!((targets.len(), weights[0].len()), (4, 4));
+        for (k, target) in targets.iter().enumerate().skip(2) {
+            let length = target.iter().flatten().map(|v| v * v).sum::<f32>().sqrt();
+            assert!((length - 1.0).abs() < 1e-5, "target {k}: length {length}");
+            assert!(weights.iter().all(|w| w[k].abs() < 1e-6), "target {k}");
+        }
+        // The directions that carry the offsets are orthonormal.
+        let d = |a: &[[f32; 3]], b: &[[f32; 3]]| -> f32 {
+            a.iter()
+                .flatten()
+                .zip(b.iter().flatten())
+                .map(|(x, y)| x * y)
+                .sum()
+        };
+        assert!((d(&targets[0], &targets[0]) - 1.0).abs() < 1e-5);
+        assert!(d(&targets[0], &targets[1]).abs() < 1e-5);
     }
 
     #[test]

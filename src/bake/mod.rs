@@ -3,6 +3,7 @@
 pub mod compress;
 pub mod normals;
 pub mod pbns;
+pub mod replay;
 pub mod sequence;
 
 use crate::geometry::mesh::TriMesh;

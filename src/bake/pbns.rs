@@ -3,17 +3,20 @@
 //! the MLP output projected on it, one weight track per clip.
 
 use super::compress::{
-    offset_matrix, spectrum, spectrum_of, unit_targets, weights_from_zero, FromZero, UsedOffsets,
+    active_columns, offset_matrix, spectrum_of, spectrum_of_product, unit_targets,
+    weights_from_zero, FromZero,
 };
 use super::normals;
+use super::replay::{distances, Played};
 use super::{animation_asset, moved_by, skeleton_asset, skinned_mesh_asset, BODY_COLOR};
 use crate::models::file::ModelFile;
 use crate::models::pbns::flat;
+use crate::models::pose_features::PoseBatch;
 use crate::models::{predict_chunks, Pbns};
 use crate::rig::{SkelAnimation, Skeleton, Skin};
 use anyhow::{bail, Result};
 use exporters::asset::{BakedAsset, BlendShape};
-use tch::{Device, Kind};
+use tch::{Device, Kind, Tensor};
 
 /// Garment colour in viewers.
 pub const GARMENT_COLOR: [f32; 3] = [0.25, 0.45, 0.8];
@@ -53,24 +56,34 @@ pub struct ClipError {
     pub pruning_error_m: Option<f32>,
 }
 
-/// Network coefficients `X` for every frame of a clip, `[frame][k]`.
-fn clip_coefficients(
-    network: &Pbns,
-    skeleton: &Skeleton,
-    clip: &SkelAnimation,
-    device: Device,
-) -> Vec<Vec<f32>> {
-    let poses: Vec<_> = (0..clip.frame_count())
-        .map(|f| clip.local_pose(f))
-        .collect();
-    let batch = network.batch(skeleton, &poses, device);
-    let x = predict_chunks(poses.len(), |s, n| {
-        network.blend_weights(&batch.slice(s, n))
-    });
-    let x: Vec<f32> = flat(&x, Kind::Float);
-    x.chunks_exact(network.blend_shape_count())
-        .map(<[f32]>::to_vec)
-        .collect()
+/// A clip as the network sees it: its pose batch (features and skinning matrices, built once)
+/// and the MLP's output on it, from which both the file's weights and the network's forward pass
+/// for the replay check are made.
+struct ClipNetwork {
+    batch: PoseBatch,
+    /// Blend-shape weights `[frame, K (+ S)]` ([`Pbns::blend_weights`]).
+    x: Tensor,
+}
+
+impl ClipNetwork {
+    fn new(network: &Pbns, skeleton: &Skeleton, clip: &SkelAnimation, device: Device) -> Self {
+        let poses: Vec<_> = (0..clip.frame_count())
+            .map(|f| clip.local_pose(f))
+            .collect();
+        let batch = network.batch(skeleton, &poses, device);
+        let x = predict_chunks(poses.len(), |s, n| {
+            network.blend_weights(&batch.slice(s, n))
+        });
+        ClipNetwork { batch, x }
+    }
+
+    /// Network coefficients `X` for every frame, `[frame][k]`.
+    fn coefficients(&self, network: &Pbns) -> Vec<Vec<f32>> {
+        let x: Vec<f32> = flat(&self.x, Kind::Float);
+        x.chunks_exact(network.blend_shape_count())
+            .map(<[f32]>::to_vec)
+            .collect()
+    }
 }
 
 /// The network's blend shapes (the PSD basis `D`, and a swing's `E`) as offset sets.
@@ -99,17 +112,13 @@ pub fn bake(
         anyhow::bail!("this swing turns swing bones, which `bake` cannot write yet: eval it to a point cache (--out NAME.pc2/.abc/.usd) instead");
     }
     let mut clock = Phases::start();
-    let basis = basis(network);
-    let per_clip: Vec<Vec<Vec<f32>>> = clips
+    let inputs: Vec<ClipNetwork> = clips
         .iter()
-        .map(|c| clip_coefficients(network, model.skeleton(), c, device))
+        .map(|c| ClipNetwork::new(network, model.skeleton(), c, device))
         .collect();
+    let per_clip: Vec<Vec<Vec<f32>>> = inputs.iter().map(|c| c.coefficients(network)).collect();
     clock.lap("network");
     let all: Vec<Vec<f32>> = per_clip.iter().flatten().cloned().collect();
-    let used = UsedOffsets {
-        basis: &basis,
-        coefficients: &all,
-    };
     let network_skin = network.skin();
     let skin = file_skin(&network_skin, opts.influences)?;
     let pruned = skin.influences < network_skin.influences;
@@ -117,6 +126,12 @@ pub fn bake(
     // 1,247 frames) are needed only to add correctives to or to measure a tolerance against: a
     // plain count of targets takes the leading directions without them.
     let needs_reference = pruned || matches!(opts.targets, Targets::Tolerance(_));
+    // The basis as offset sets: the file's targets with neither budget, else the reference's.
+    let basis = if needs_reference || opts.targets == Targets::Full {
+        basis(network)
+    } else {
+        Vec::new()
+    };
     let mut reference = if needs_reference {
         offset_matrix(&basis, &all)
     } else {
@@ -125,11 +140,12 @@ pub fn bake(
     if pruned {
         add_skin_correctives(&mut reference, model, clips, &network_skin, &skin);
     }
-    // Without correctives the offsets are X·D: the fast small-basis SVD applies.
+    // Without correctives the offsets are X·D: the fast small-basis decomposition applies.
     let spectrum = if pruned {
         spectrum_of(&reference)
     } else {
-        spectrum(&used)
+        let x: Vec<&Tensor> = inputs.iter().map(|c| &c.x).collect();
+        spectrum_of_product(&Tensor::cat(&x, 0), &network.blend_shapes())
     };
     let top = spectrum.singular_values.first().copied().unwrap_or(0.0);
     let used_rank = spectrum
@@ -221,32 +237,72 @@ pub fn bake(
         phases: Vec::new(),
     };
     clock.lap("asset");
+    // The network's side of the replay check: its template, its basis and its slot skin, on
+    // the MLP's coefficients (the units that fire on some frame: the others add exact zeros).
+    let x_all: Vec<&Tensor> = inputs.iter().map(|c| &c.x).collect();
+    let active = Tensor::from_slice(&active_columns(&Tensor::cat(&x_all, 0)));
+    let cpu = |t: &Tensor| t.to_device(Device::Cpu).to_kind(Kind::Float).contiguous();
+    let network_shapes = cpu(&network.blend_shapes().index_select(0, &active));
+    let template: Vec<f32> = flat(&network.template, Kind::Float);
+    let slots = network.slots();
+    let slot_joints: Vec<usize> = slots.joints.iter().map(|&j| j as usize).collect();
+    // The file's side: its base, targets, weights and skin.
+    let file_rest: Vec<f32> = base.positions.iter().flatten().copied().collect();
+    let file_shapes = Tensor::from_slice(&targets.concat().concat())
+        .view([targets.len() as i64, file_rest.len() as i64]);
+    let file_joints: Vec<usize> = skin.joint_indices.iter().map(|&j| j as usize).collect();
     let mut start = 0;
-    for (clip, x) in clips.iter().zip(&per_clip) {
+    for ((clip, x), input) in clips.iter().zip(&per_clip).zip(&inputs) {
         let w = &weights[start..start + x.len()];
         start += x.len();
         let mut anim = animation_asset(clip);
         anim.blend_shape_weights = vec![(0, w.iter().flatten().copied().collect())];
         asset.animations.push(anim);
+        clock.lap("asset");
         // The network's own forward pass, not the basis and skin the bake was made from: a
         // fault in reading those out of the network would be on both sides of the comparison.
-        clock.lap("asset");
-        let network = clip_forward(network, model.skeleton(), clip, device);
-        clock.lap("network");
-        let baked = Replay::new(&targets, w, &skin);
-        let pruning = pruned.then(|| {
-            let uncorrected = Replay::new(&basis, x, &skin);
-            replay_error(
-                model.skeleton(),
-                &model.garment.positions,
-                clip,
-                &network,
-                &uncorrected,
-            )
-            .max_error_m
-        });
-        let mut error = replay_error(model.skeleton(), &base.positions, clip, &network, &baked);
-        error.pruning_error_m = pruning;
+        let frames = x.len();
+        let network_x = cpu(&input.x.index_select(1, &active));
+        let network_rows: Vec<f32> = flat(&input.batch.skinning, Kind::Float);
+        let played_by_network = Played {
+            rest: &template,
+            shapes: &network_shapes,
+            weights: &network_x,
+            skinning: &network_rows,
+            joints: &slot_joints,
+            slot_weights: &slots.weights,
+            influences: slots.influences,
+        };
+        // The file's skinning from the rig's own joint matrices.
+        let file_rows = rig_skinning_rows(model.skeleton(), clip);
+        let file_weights =
+            Tensor::from_slice(&w.concat()).view([frames as i64, targets.len() as i64]);
+        let played_by_file = Played {
+            rest: &file_rest,
+            shapes: &file_shapes,
+            weights: &file_weights,
+            skinning: &file_rows,
+            joints: &file_joints,
+            slot_weights: &skin.joint_weights,
+            influences: skin.influences,
+        };
+        let mut error = clip_error(clip, &distances(&played_by_file, &played_by_network));
+        if pruned {
+            // The network's basis and coefficients on the pruned skin, uncorrected.
+            let garment_rest: Vec<f32> =
+                model.garment.positions.iter().flatten().copied().collect();
+            let uncorrected = Played {
+                rest: &garment_rest,
+                ..played_by_file
+            };
+            let uncorrected = Played {
+                shapes: &network_shapes,
+                weights: &network_x,
+                ..uncorrected
+            };
+            error.pruning_error_m =
+                Some(clip_error(clip, &distances(&uncorrected, &played_by_network)).max_error_m);
+        }
         report.clips.push(error);
         clock.lap("replay");
     }
@@ -348,92 +404,29 @@ fn add_skin_correctives(
     }
 }
 
-/// One way of playing the garment: rest-space offsets per frame (3N × frames), then a skin.
-struct Replay<'a> {
-    offsets: nalgebra::DMatrix<f32>,
-    skin: &'a Skin,
-}
-
-impl<'a> Replay<'a> {
-    fn new(shapes: &[Vec<[f32; 3]>], weights: &[Vec<f32>], skin: &'a Skin) -> Self {
-        Replay {
-            offsets: offset_matrix(shapes, weights),
-            skin,
-        }
-    }
-
-    fn frame(
-        &self,
-        rest: &[[f32; 3]],
-        f: usize,
-        skinning: &[nalgebra::Matrix4<f32>],
-    ) -> Vec<[f32; 3]> {
-        let column = self.offsets.column(f);
-        let moved: Vec<[f32; 3]> = rest
-            .iter()
-            .zip(column.as_slice().chunks_exact(3))
-            .map(|(p, d)| [p[0] + d[0], p[1] + d[1], p[2] + d[2]])
-            .collect();
-        self.skin.skin_points(&moved, skinning)
-    }
-}
-
-/// The network's forward pass on every frame of a clip (world space), `[frame][vertex]`.
-fn clip_forward(
-    network: &Pbns,
-    skeleton: &Skeleton,
-    clip: &SkelAnimation,
-    device: Device,
-) -> Vec<Vec<[f32; 3]>> {
-    let poses: Vec<_> = (0..clip.frame_count())
-        .map(|f| clip.local_pose(f))
-        .collect();
-    // `predict`: the forward pass eval writes caches with (on the CPU it skins only each vertex's
-    // slots; the dense `forward_points` costs twice the time, 0.63 vs 0.35 s on 1,247 frames,
-    // for the same points within 4e-7 m).
-    let n = network.shape.vertices;
-    let points = crate::models::pose_features::tensor_points(
-        &network.predict(&network.batch(skeleton, &poses, device)),
-    );
-    points.chunks_exact(n).map(<[_]>::to_vec).collect()
-}
-
-/// World-space distance between the baked replay (its offsets played on `baked_rest`: the
-/// bake's base mesh holds the part of the offsets its weights no longer carry) and the network's
-/// frames, every frame of a clip.
-fn replay_error(
-    skeleton: &Skeleton,
-    baked_rest: &[[f32; 3]],
-    clip: &SkelAnimation,
-    network: &[Vec<[f32; 3]>],
-    baked: &Replay,
-) -> ClipError {
+/// Skinning matrices of every frame of `clip` from the rig (row-major 3 × 4), `[frame][J][12]`.
+fn rig_skinning_rows(skeleton: &Skeleton, clip: &SkelAnimation) -> Vec<f32> {
     use rayon::prelude::*;
-    let errors: Vec<(f32, f32)> = (0..clip.frame_count())
+    let frames: Vec<Vec<f32>> = (0..clip.frame_count())
         .into_par_iter()
         .map(|f| {
-            let skinning = skeleton.skinning_matrices(&clip.local_pose(f));
-            let out = baked.frame(baked_rest, f, &skinning);
-            let d: Vec<f32> = network[f]
+            skeleton
+                .skinning_matrices(&clip.local_pose(f))
                 .iter()
-                .zip(&out)
-                .map(|(a, b)| dist(a, b))
-                .collect();
-            (
-                d.iter().copied().fold(0.0, f32::max),
-                d.iter().sum::<f32>() / d.len().max(1) as f32,
-            )
+                .flat_map(|m| (0..3).flat_map(move |r| (0..4).map(move |c| m[(r, c)])))
+                .collect()
         })
         .collect();
+    frames.concat()
+}
+
+/// A clip's replay error from its per-frame largest and mean distances.
+fn clip_error(clip: &SkelAnimation, per_frame: &[(f32, f32)]) -> ClipError {
     ClipError {
         clip: clip.name.clone(),
         frames: clip.frame_count(),
-        max_error_m: errors.iter().map(|e| e.0).fold(0.0, f32::max),
-        mean_error_m: errors.iter().map(|e| e.1).sum::<f32>() / errors.len().max(1) as f32,
+        max_error_m: per_frame.iter().map(|e| e.0).fold(0.0, f32::max),
+        mean_error_m: per_frame.iter().map(|e| e.1).sum::<f32>() / per_frame.len().max(1) as f32,
         pruning_error_m: None,
     }
-}
-
-fn dist(a: &[f32; 3], b: &[f32; 3]) -> f32 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
