@@ -432,3 +432,75 @@ fn commands_are_extracted_and_shortened() {
         )
     );
 }
+
+/// docs/reference/commands.md says what the binary says: each section's text is the `--help` of
+/// its command as this build prints it, and every command has a section. After changing a flag
+/// or its help, rewrite the page with `bash scripts/reference_commands.sh`.
+#[test]
+fn the_command_reference_is_the_binarys_help() {
+    let help = |command: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_garmentbake"))
+            .args(command)
+            .arg("--help")
+            .env("COLUMNS", "100")
+            .output()
+            .expect("run garmentbake");
+        assert!(out.status.success(), "garmentbake {command:?} --help");
+        String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .map(|l| l.trim_end().to_string())
+            .collect::<Vec<String>>()
+    };
+    let page = std::fs::read_to_string(root().join("docs/reference/commands.md")).unwrap();
+    let mut documented = Vec::new();
+    let mut lines = page.lines();
+    while let Some(line) = lines.next() {
+        let Some(command) = line
+            .strip_prefix("## `garmentbake")
+            .and_then(|c| c.strip_suffix('`'))
+        else {
+            continue;
+        };
+        assert_eq!(lines.next(), Some(""), "{line}");
+        assert_eq!(lines.next(), Some("```text"), "{line}");
+        let text: Vec<&str> = lines.by_ref().take_while(|l| *l != "```").collect();
+        let words: Vec<&str> = command.split_whitespace().collect();
+        let printed = help(&words);
+        if let Some(i) = (0..text.len().max(printed.len()))
+            .find(|&i| text.get(i).copied() != printed.get(i).map(String::as_str))
+        {
+            panic!(
+                "docs/reference/commands.md: `garmentbake{command} --help` differs from the \
+                 page at its line {}: page {:?}, binary {:?}; run bash \
+                 scripts/reference_commands.sh",
+                i + 1,
+                text.get(i),
+                printed.get(i)
+            );
+        }
+        documented.push(command.trim().to_string());
+    }
+    // The commands `garmentbake --help` lists (two spaces, a name), each with a section of its
+    // own or of its subcommands.
+    let listed = help(&[]);
+    let names = listed
+        .iter()
+        .skip_while(|l| *l != "Commands:")
+        .skip(1)
+        .take_while(|l| !l.is_empty())
+        .filter_map(|l| l.strip_prefix("  ").filter(|n| !n.starts_with(' ')))
+        .filter_map(|l| l.split_whitespace().next())
+        .filter(|n| *n != "help");
+    let mut commands = 0;
+    for name in names {
+        commands += 1;
+        assert!(
+            documented
+                .iter()
+                .any(|d| d == name || d.starts_with(&format!("{name} "))),
+            "docs/reference/commands.md has no section for `garmentbake {name}`: run bash \
+             scripts/reference_commands.sh"
+        );
+    }
+    assert!(commands >= 15, "{commands} commands listed by --help");
+}
