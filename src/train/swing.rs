@@ -381,9 +381,11 @@ impl Trainer {
         }
         let per_term = (&per_term + per_term.transpose(1, 2)) * 0.5;
         let hessian = per_term.sum_dim_intlist(0, false, Kind::Double);
+        // The mass the inertia term weighs (`--inertia` scales it).
         let mass = Tensor::from_slice(&self.cloth.arrays.mass)
             .to_kind(Kind::Double)
-            .to_device(device);
+            .to_device(device)
+            * f64::from(self.settings.inertia);
         let weighted = basis.view([s, n, 3]) * mass.sqrt().view([1, n, 1]);
         let weighted = weighted.view([s, 3 * n]);
         let mass_b = weighted.matmul(&weighted.tr());
