@@ -30,6 +30,8 @@ echo "== a production rig: a Character Creator take (cm, 99 joints, Z-up root, n
 $gb pose --body samples/body.glb --motion samples/motions/cc_base_002_01.bvh --out out/cc_base_002_01.glb
 node tools/node/validate.mjs out/cc_base_002_01.glb
 
-echo "== pictures"
-$gb preview --body samples/body.glb --motion samples/motions/131_02.bvh --frames 6 --out out/131_02_body.png
+echo "== what the job made: the trained skirt on 131_02 beside plain LBS of the same skirt, and a page that plays the bake"
+$gb preview --body samples/body.glb --motion samples/motions/131_02.bvh --model runs/skirt_quick.safetensors \
+  --lbs --frames 6 --out out/131_02_skirt_vs_lbs.png
+$gb view out/skirt.glb --out out/skirt.html
 echo "outputs: $(cd out && ls | tr '\n' ' ')"
