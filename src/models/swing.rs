@@ -548,25 +548,31 @@ mod tests {
         assert!((f4[per - 2] + 1.0).abs() < 1e-6);
     }
 
-    /// The recurrence feeds its own output back: with the motion and pose fixed, a network
-    /// whose only nonzero weight copies `Y_{t−1}` plus a constant counts frames.
-    #[test]
-    fn play_feeds_the_last_weights_back() {
+    /// A swing of one blend shape and no hidden layer, with its motion-input and network-input
+    /// counts.
+    fn one_shape(integrator: SwingIntegrator) -> (Swing, i64, i64) {
         let shape = SwingShape {
             layers: 0,
             shapes: 1,
-            bones: vec![],
-            pivots: vec![],
+            integrator,
             ..shape(vec![0])
         };
         let m = shape.motion_inputs() as i64;
-        let mut swing = Swing::new(
-            shape.clone(),
+        let inputs = shape.inputs() as i64;
+        let swing = Swing::new(
+            shape,
             Tensor::zeros([m], (Kind::Float, Device::Cpu)),
             Tensor::ones([m], (Kind::Float, Device::Cpu)),
             Device::Cpu,
         );
-        let inputs = shape.inputs() as i64;
+        (swing, m, inputs)
+    }
+
+    /// The recurrence feeds its own output back: with the motion and pose fixed, a network
+    /// whose only nonzero weight copies `Y_{t−1}` plus a constant counts frames.
+    #[test]
+    fn play_feeds_the_last_weights_back() {
+        let (mut swing, m, inputs) = one_shape(SwingIntegrator::Network);
         let w = Tensor::zeros([inputs, 1], (Kind::Float, Device::Cpu));
         let _ = w.get(m + 6).fill_(1.0); // Y_{t−1}
         swing.mlp = vec![(w, Tensor::from_slice(&[1.0f32]))];
@@ -584,20 +590,7 @@ mod tests {
     /// `F / (Δt²·K)` instead of drifting.
     #[test]
     fn a_modal_swing_oscillates_decays_and_settles_under_a_steady_drive() {
-        let shape = SwingShape {
-            layers: 0,
-            shapes: 1,
-            integrator: SwingIntegrator::Modal,
-            ..shape(vec![0])
-        };
-        let m = shape.motion_inputs() as i64;
-        let mut swing = Swing::new(
-            shape.clone(),
-            Tensor::zeros([m], (Kind::Float, Device::Cpu)),
-            Tensor::ones([m], (Kind::Float, Device::Cpu)),
-            Device::Cpu,
-        );
-        let inputs = shape.inputs() as i64;
+        let (mut swing, m, inputs) = one_shape(SwingIntegrator::Modal);
         assert_eq!(inputs, m + 6, "no state among the network's inputs");
         let drive = |swing: &mut Swing, f: f32| {
             swing.mlp = vec![(
