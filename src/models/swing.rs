@@ -135,6 +135,17 @@ impl Modes {
     }
 }
 
+/// One modal step for rows of frames: `Y_t = (carry·Y_{t−1} − Y_{t−2} + F)·lhs⁻ᵀ` with
+/// `(lhs⁻¹, carry)` from [`Modes::step_matrices`] (both symmetric).
+fn modal_step(
+    (inverse, carry): &(Tensor, Tensor),
+    last: &Tensor,
+    before: &Tensor,
+    drive: &Tensor,
+) -> Tensor {
+    (last.matmul(carry) - before + drive).matmul(inverse)
+}
+
 pub struct Swing {
     pub shape: SwingShape,
     /// `(weight [in, out], bias [out])`: hidden ReLU layers, then a linear layer to `S`.
@@ -234,11 +245,13 @@ impl Swing {
             None => self.mlp_forward(Tensor::cat(&[motion, pose, last, before], 1)),
             Some(modes) => {
                 let drive = self.mlp_forward(Tensor::cat(&[motion, pose], 1));
-                let (inverse, carry) = modes.step_matrices(1.0 / f64::from(self.shape.fps));
-                // Rows are frames: `Y_t = (carry·Y_{t−1} − Y_{t−2} + F)·lhs⁻ᵀ` (both symmetric).
-                (last.matmul(&carry) - before + drive).matmul(&inverse)
+                modal_step(&modes.step_matrices(self.dt()), last, before, &drive)
             }
         }
+    }
+
+    fn dt(&self) -> f64 {
+        1.0 / f64::from(self.shape.fps)
     }
 
     fn mlp_forward(&self, mut x: Tensor) -> Tensor {
@@ -262,15 +275,26 @@ impl Swing {
                 [1, self.shape.outputs() as i64],
                 (Kind::Float, motion.device()),
             );
+            // The modal drive reads no state: one network pass for the clip, and the step's
+            // matrices once, leave only the recurrence per frame.
+            let modal = self.modes.as_ref().map(|modes| {
+                let drives = self.mlp_forward(Tensor::cat(&[&motion, pose], 1));
+                (modes.step_matrices(self.dt()), drives)
+            });
             let (mut last, mut before) = (zero.shallow_clone(), zero.shallow_clone());
             let mut out = Vec::with_capacity(frames as usize);
             for f in 0..frames {
-                let y = self.step(
-                    &motion.narrow(0, f, 1),
-                    &pose.narrow(0, f, 1),
-                    &last,
-                    &before,
-                );
+                let y = match &modal {
+                    Some((matrices, drives)) => {
+                        modal_step(matrices, &last, &before, &drives.narrow(0, f, 1))
+                    }
+                    None => self.step(
+                        &motion.narrow(0, f, 1),
+                        &pose.narrow(0, f, 1),
+                        &last,
+                        &before,
+                    ),
+                };
                 before = last;
                 last = y.shallow_clone();
                 out.push(y);
@@ -638,5 +662,42 @@ mod tests {
             y[599]
         );
         assert!(y.iter().all(|v| v.is_finite() && *v < 2.0 * settled));
+    }
+
+    /// `play` (one network pass and the step's matrices once per clip) is the modal step
+    /// applied frame after frame, for a drive that changes every frame.
+    #[test]
+    fn a_modal_play_is_its_steps_in_order() {
+        let (mut swing, m, inputs) = one_shape(SwingIntegrator::Modal);
+        let cpu = (Kind::Float, Device::Cpu);
+        swing.mlp = vec![(
+            Tensor::ones([inputs, 1], cpu) * 0.05,
+            Tensor::from_slice(&[0.02f32]),
+        )];
+        let frames = 40;
+        let motion = Tensor::linspace(-3.0, 3.0, frames * m, cpu)
+            .view([frames, m])
+            .sin();
+        let pose = Tensor::zeros([frames, 6], cpu);
+        let played = swing.play(&motion, &pose);
+        let normalised = swing.normalise(&motion);
+        let (mut last, mut before) = (Tensor::zeros([1, 1], cpu), Tensor::zeros([1, 1], cpu));
+        let mut worst = 0.0f64;
+        for f in 0..frames {
+            let y = swing.step(
+                &normalised.narrow(0, f, 1),
+                &pose.narrow(0, f, 1),
+                &last,
+                &before,
+            );
+            worst = worst.max((&y - played.narrow(0, f, 1)).abs().max().double_value(&[]));
+            before = std::mem::replace(&mut last, y);
+        }
+        let size = played.abs().max().double_value(&[]);
+        assert!(size > 0.01, "the drive moves the swing: {size}");
+        assert!(
+            worst <= 1e-5 * size,
+            "play and steps differ by {worst} (size {size})"
+        );
     }
 }
