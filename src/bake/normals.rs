@@ -11,7 +11,7 @@
 
 use super::compress::offset_matrix;
 use crate::geometry::normals::vertex_normals;
-use nalgebra::{DMatrix, Matrix3, Matrix4, Vector3};
+use nalgebra::{DMatrix, Matrix4, Vector3};
 use rayon::prelude::*;
 
 /// The NORMAL attribute and one normal delta set per target, in the welded mesh's vertex order.
@@ -72,6 +72,9 @@ pub fn fit(
         (Kind::Double, tch::Device::Cpu),
     );
     let mut xty = Tensor::zeros([k as i64 + 1, n3 as i64], (Kind::Double, tch::Device::Cpu));
+    // The corner angles' triangles as index lanes, once for every sample.
+    let corners = Corners::new(triangles, base.len());
+    let mut y = vec![0.0f64; CHUNK.min(samples.len()) * n3];
     for chunk in samples.chunks(CHUNK) {
         let x: Vec<f32> = chunk
             .iter()
@@ -82,25 +85,32 @@ pub fn fit(
             .to_kind(Kind::Double);
         let owned: Vec<Vec<f32>> = chunk.iter().map(|w| w.1.to_vec()).collect();
         let offsets = offset_matrix(targets, &owned);
-        let normals: Vec<Vec<[f32; 3]>> = (0..chunk.len())
-            .into_par_iter()
-            .map(|f| {
+        // Samples as rows (frames × 3N, f64), so XᵀY is one matrix product.
+        let rows = &mut y[..chunk.len() * n3];
+        rows.par_chunks_mut(n3).enumerate().for_each_init(
+            || Scratch::new(base.len()),
+            |scratch, (f, row)| {
                 let column = offsets.column(f);
-                let points: Vec<[f32; 3]> = base
-                    .iter()
+                for ((p, b), d) in scratch
+                    .points
+                    .iter_mut()
+                    .zip(base)
                     .zip(column.as_slice().chunks_exact(3))
-                    .map(|(p, d)| [p[0] + d[0], p[1] + d[1], p[2] + d[2]])
-                    .collect();
-                match chunk[f].0 {
-                    Some(frame) => unskinned_normals(&points, triangles, &blended(frame)),
-                    None => corner_angle_normals(&points, triangles),
+                {
+                    *p = [b[0] + d[0], b[1] + d[1], b[2] + d[2]];
                 }
-            })
-            .collect();
-        // Samples as rows (frames × 3N), so XᵀY is one matrix product.
-        let y = Tensor::from_slice(normals.concat().as_flattened())
-            .view([chunk.len() as i64, n3 as i64])
-            .to_kind(Kind::Double);
+                match chunk[f].0 {
+                    Some(frame) => unskinned_normals(scratch, &corners, &blended(frame), row),
+                    None => {
+                        corners.normals(&scratch.points, &mut scratch.sums);
+                        for (out, n) in row.chunks_exact_mut(3).zip(&scratch.sums) {
+                            out.copy_from_slice(&n.map(f64::from));
+                        }
+                    }
+                }
+            },
+        );
+        let y = Tensor::from_slice(rows).view([chunk.len() as i64, n3 as i64]);
         gram += x.tr().matmul(&x);
         xty += x.tr().matmul(&y);
     }
@@ -146,99 +156,224 @@ pub fn fit(
     }
 }
 
-/// The world-space normals of `points` skinned by `blended`, each taken back through its
-/// vertex's matrix (`A⁻¹ n`, unit): the rest-space normal that skinning turns into `n`.
-fn unskinned_normals(
-    points: &[[f32; 3]],
-    triangles: &[[u32; 3]],
-    blended: &[Matrix4<f32>],
-) -> Vec<[f32; 3]> {
-    let world: Vec<[f32; 3]> = points
-        .iter()
-        .zip(blended)
-        .map(|(p, m)| {
-            let q = m.fixed_view::<3, 3>(0, 0) * Vector3::from(*p) + m.fixed_view::<3, 1>(0, 3);
-            [q.x, q.y, q.z]
-        })
-        .collect();
-    corner_angle_normals(&world, triangles)
-        .iter()
-        .zip(blended)
-        .map(|(n, m)| {
-            let a: Matrix3<f32> = m.fixed_view::<3, 3>(0, 0).into_owned();
-            match a.try_inverse() {
-                Some(inverse) => {
-                    let back = inverse * Vector3::from(*n);
-                    back.try_normalize(1e-12).unwrap_or(back).into()
-                }
-                None => *n,
-            }
-        })
-        .collect()
+/// One worker's buffers for the samples it fits, reused from sample to sample.
+struct Scratch {
+    /// The sample's rest-space points.
+    points: Vec<[f32; 3]>,
+    /// Those points skinned.
+    world: Vec<[f32; 3]>,
+    /// Per vertex, the corner-angle sum, then the unit normal.
+    sums: Vec<[f32; 3]>,
 }
 
-/// [`vertex_normals`] (each face's unit normal weighted by its corner angle at the vertex) with a
-/// polynomial arctangent (within 1e-5 rad) and the third corner's angle as π minus the other
-/// two: the fit computes the normals of a few hundred frames, and `atan2` was most of it.
-fn corner_angle_normals(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Vec<[f32; 3]> {
-    let sub = |a: [f32; 3], b: [f32; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
-    let cross = |a: [f32; 3], b: [f32; 3]| {
-        [
-            a[1] * b[2] - a[2] * b[1],
-            a[2] * b[0] - a[0] * b[2],
-            a[0] * b[1] - a[1] * b[0],
-        ]
-    };
-    let dot = |a: [f32; 3], b: [f32; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-    let norm = |a: [f32; 3]| dot(a, a).sqrt();
-    // The angle between u and v: atan2(|u × v|, u · v).
-    let angle = |u: [f32; 3], v: [f32; 3]| atan2_nonnegative(norm(cross(u, v)), dot(u, v));
-    let mut sums = vec![[0.0f32; 3]; positions.len()];
-    for tri in triangles {
-        let [a, b, c] = tri.map(|i| positions[i as usize]);
-        let n = cross(sub(b, a), sub(c, a));
-        let length = norm(n);
-        if !(length > f32::MIN_POSITIVE && length.is_finite()) {
-            continue;
-        }
-        let n = n.map(|x| x / length);
-        let at_a = angle(sub(b, a), sub(c, a));
-        let at_b = angle(sub(c, b), sub(a, b));
-        let at_c = (std::f32::consts::PI - at_a - at_b).max(0.0);
-        for (&v, weight) in tri.iter().zip([at_a, at_b, at_c]) {
-            let sum = &mut sums[v as usize];
-            (0..3).for_each(|k| sum[k] += n[k] * weight);
+impl Scratch {
+    fn new(vertices: usize) -> Scratch {
+        Scratch {
+            points: vec![[0.0; 3]; vertices],
+            world: vec![[0.0; 3]; vertices],
+            sums: vec![[0.0; 3]; vertices],
         }
     }
-    sums.into_iter()
-        .map(|s| {
-            let length = norm(s);
-            if length > f32::MIN_POSITIVE && length.is_finite() {
-                s.map(|x| x / length)
-            } else {
-                [0.0; 3]
+}
+
+/// The world-space normals of `scratch.points` skinned by `blended`, each taken back through
+/// its vertex's matrix (`A⁻¹ n`, unit): the rest-space normal that skinning turns into `n`;
+/// written to `out` (`[N * 3]`).
+fn unskinned_normals(
+    scratch: &mut Scratch,
+    corners: &Corners,
+    blended: &[Matrix4<f32>],
+    out: &mut [f64],
+) {
+    for ((q, p), m) in scratch.world.iter_mut().zip(&scratch.points).zip(blended) {
+        let r = m.fixed_view::<3, 3>(0, 0) * Vector3::from(*p) + m.fixed_view::<3, 1>(0, 3);
+        *q = [r.x, r.y, r.z];
+    }
+    corners.normals(&scratch.world, &mut scratch.sums);
+    for ((out, n), m) in out.chunks_exact_mut(3).zip(&scratch.sums).zip(blended) {
+        let back = back_through(m, *n);
+        out.copy_from_slice(&back.map(f64::from));
+    }
+}
+
+/// `A⁻¹ n` made unit (left as it is when shorter than 1e-12), `A` the upper-left 3 × 3 of `m`,
+/// through its adjugate; `n` itself where `A` is singular.
+#[inline]
+fn back_through(m: &Matrix4<f32>, n: [f32; 3]) -> [f32; 3] {
+    let a = |r: usize, c: usize| m[(r, c)];
+    // Cofactors C[r][c] of A.
+    let c = [
+        [
+            a(1, 1) * a(2, 2) - a(1, 2) * a(2, 1),
+            a(1, 2) * a(2, 0) - a(1, 0) * a(2, 2),
+            a(1, 0) * a(2, 1) - a(1, 1) * a(2, 0),
+        ],
+        [
+            a(0, 2) * a(2, 1) - a(0, 1) * a(2, 2),
+            a(0, 0) * a(2, 2) - a(0, 2) * a(2, 0),
+            a(0, 1) * a(2, 0) - a(0, 0) * a(2, 1),
+        ],
+        [
+            a(0, 1) * a(1, 2) - a(0, 2) * a(1, 1),
+            a(0, 2) * a(1, 0) - a(0, 0) * a(1, 2),
+            a(0, 0) * a(1, 1) - a(0, 1) * a(1, 0),
+        ],
+    ];
+    let det = a(0, 0) * c[0][0] + a(0, 1) * c[0][1] + a(0, 2) * c[0][2];
+    if det == 0.0 {
+        return n;
+    }
+    // A⁻¹ = Cᵀ / det.
+    let back = [0, 1, 2].map(|i| (c[0][i] * n[0] + c[1][i] * n[1] + c[2][i] * n[2]) / det);
+    let length = back.iter().map(|x| x * x).sum::<f32>().sqrt();
+    if length > 1e-12 {
+        back.map(|x| x / length)
+    } else {
+        back
+    }
+}
+
+/// Triangles in lanes of [`LANES`], padded with degenerate ones (which add nothing).
+const LANES: usize = 8;
+
+/// A mesh's triangles as index lanes, for [`Corners::normals`].
+struct Corners {
+    /// Per lane chunk, the first, second and third corners of its triangles.
+    lanes: Vec<[[u32; LANES]; 3]>,
+    vertices: usize,
+}
+
+impl Corners {
+    fn new(triangles: &[[u32; 3]], vertices: usize) -> Corners {
+        let lanes = triangles
+            .chunks(LANES)
+            .map(|chunk| {
+                let mut out = [[0u32; LANES]; 3];
+                for (l, tri) in chunk.iter().enumerate() {
+                    (0..3).for_each(|c| out[c][l] = tri[c]);
+                }
+                out
+            })
+            .collect();
+        Corners { lanes, vertices }
+    }
+
+    /// [`vertex_normals`] of `positions` (each face's unit normal weighted by its corner angle at
+    /// the vertex) into `out`, with a polynomial arctangent (within 1e-5 rad), the third
+    /// corner's angle as π minus the other two, and every corner's `|u × v|` the face's
+    /// doubled area: the fit computes the normals of a few hundred frames, and `atan2` was most
+    /// of it. Eight triangles at a time in SIMD lanes, summed into the vertices in triangle
+    /// order.
+    fn normals(&self, positions: &[[f32; 3]], out: &mut Vec<[f32; 3]>) {
+        assert_eq!(positions.len(), self.vertices, "one position per vertex");
+        out.clear();
+        out.resize(self.vertices, [0.0; 3]);
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2 (checked just above), the function's only requirement.
+            unsafe { self.sums_avx2(positions, out) };
+            normalize(out);
+            return;
+        }
+        self.sums(positions, out);
+        normalize(out);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn sums_avx2(&self, positions: &[[f32; 3]], out: &mut [[f32; 3]]) {
+        self.sums(positions, out)
+    }
+
+    #[inline(always)]
+    fn sums(&self, positions: &[[f32; 3]], out: &mut [[f32; 3]]) {
+        type Lane = [f32; LANES];
+        for corners in &self.lanes {
+            // Per axis, the corners' coordinates in lanes.
+            let gather = |c: usize| -> [Lane; 3] {
+                let mut p = [[0.0; LANES]; 3];
+                for (l, &v) in corners[c].iter().enumerate() {
+                    let q = positions[v as usize];
+                    (0..3).for_each(|axis| p[axis][l] = q[axis]);
+                }
+                p
+            };
+            let (a, b, c) = (gather(0), gather(1), gather(2));
+            let sub = |p: &[Lane; 3], q: &[Lane; 3]| -> [Lane; 3] {
+                std::array::from_fn(|axis| std::array::from_fn(|l| p[axis][l] - q[axis][l]))
+            };
+            let dot = |p: &[Lane; 3], q: &[Lane; 3]| -> Lane {
+                std::array::from_fn(|l| p[0][l] * q[0][l] + p[1][l] * q[1][l] + p[2][l] * q[2][l])
+            };
+            let (ab, ac, bc, ba) = (sub(&b, &a), sub(&c, &a), sub(&c, &b), sub(&a, &b));
+            let n: [Lane; 3] = [
+                std::array::from_fn(|l| ab[1][l] * ac[2][l] - ab[2][l] * ac[1][l]),
+                std::array::from_fn(|l| ab[2][l] * ac[0][l] - ab[0][l] * ac[2][l]),
+                std::array::from_fn(|l| ab[0][l] * ac[1][l] - ab[1][l] * ac[0][l]),
+            ];
+            let length: Lane = dot(&n, &n).map(f32::sqrt);
+            let (cos_a, cos_b) = (dot(&ab, &ac), dot(&bc, &ba));
+            let mut weights = [[0.0f32; LANES]; 3];
+            let mut unit = [[0.0f32; LANES]; 3];
+            for l in 0..LANES {
+                let at_a = atan2_lane(length[l], cos_a[l]);
+                let at_b = atan2_lane(length[l], cos_b[l]);
+                let at_c = std::f32::consts::PI - at_a - at_b;
+                weights[0][l] = at_a;
+                weights[1][l] = at_b;
+                weights[2][l] = if at_c > 0.0 { at_c } else { 0.0 };
+                (0..3).for_each(|axis| unit[axis][l] = n[axis][l] / length[l]);
             }
-        })
-        .collect()
+            for l in 0..LANES {
+                if !(length[l] > f32::MIN_POSITIVE && length[l].is_finite()) {
+                    continue;
+                }
+                for (c, weight) in weights.iter().enumerate() {
+                    let sum = &mut out[corners[c][l] as usize];
+                    (0..3).for_each(|axis| sum[axis] += unit[axis][l] * weight[l]);
+                }
+            }
+        }
+    }
+}
+
+/// Each corner-angle sum made unit (zero where it has no length).
+fn normalize(sums: &mut [[f32; 3]]) {
+    for s in sums {
+        let length = (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt();
+        *s = if length > f32::MIN_POSITIVE && length.is_finite() {
+            s.map(|x| x / length)
+        } else {
+            [0.0; 3]
+        };
+    }
+}
+
+/// [`Corners::normals`] of one mesh.
+#[cfg(test)]
+fn corner_angle_normals(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Vec<[f32; 3]> {
+    let mut out = Vec::new();
+    Corners::new(triangles, positions.len()).normals(positions, &mut out);
+    out
 }
 
 /// `atan2(y, x)` for `y ≥ 0` (an angle in [0, π]) within 1e-5 rad (Abramowitz & Stegun 4.4.49's
-/// polynomial on [0, 1]).
-fn atan2_nonnegative(y: f32, x: f32) -> f32 {
-    let atan_unit = |t: f32| {
-        let t2 = t * t;
-        t * (0.999_977_26
+/// polynomial on [0, 1]), without branches, for the lanes.
+#[inline(always)]
+fn atan2_lane(y: f32, x: f32) -> f32 {
+    let ax = x.abs();
+    let (small, large) = if ax >= y { (y, ax) } else { (ax, y) };
+    let t = if large > 0.0 { small / large } else { 0.0 };
+    let t2 = t * t;
+    let a = t
+        * (0.999_977_26
             + t2 * (-0.332_623_47
                 + t2 * (0.193_543_46
-                    + t2 * (-0.116_432_87 + t2 * (0.052_653_32 - t2 * 0.011_721_2)))))
-    };
-    let ax = x.abs();
-    let a = if y == 0.0 && ax == 0.0 {
-        0.0
-    } else if ax >= y {
-        atan_unit(y / ax)
+                    + t2 * (-0.116_432_87 + t2 * (0.052_653_32 - t2 * 0.011_721_2)))));
+    let a = if ax >= y {
+        a
     } else {
-        std::f32::consts::FRAC_PI_2 - atan_unit(ax / y)
+        std::f32::consts::FRAC_PI_2 - a
     };
     if x < 0.0 {
         std::f32::consts::PI - a
@@ -273,7 +408,7 @@ mod tests {
         for i in 0..=2000 {
             let t = i as f32 / 2000.0 * std::f32::consts::PI;
             let (y, x) = (t.sin().abs() * 3.0, t.cos() * 3.0);
-            assert!((atan2_nonnegative(y, x) - y.atan2(x)).abs() < 2e-5, "{t}");
+            assert!((atan2_lane(y, x) - y.atan2(x)).abs() < 2e-5, "{t}");
         }
         let mut mesh = grid(12, 9, 0.1);
         for (i, p) in mesh.positions.iter_mut().enumerate() {
@@ -287,6 +422,37 @@ mod tests {
             .map(|(a, b)| angle(*a, *b))
             .fold(0.0f32, f32::max);
         assert!(worst < 0.01, "{worst}°");
+    }
+
+    #[test]
+    fn the_adjugate_takes_a_normal_back_as_the_inverse_does() {
+        // `back_through` against nalgebra's inverse, made unit, on skinning-like matrices
+        // (rotation-ish, scaled, sheared, mirrored), and the singular case keeping the normal.
+        let noise = |i: usize| ((i.wrapping_mul(2_654_435_761) >> 7) % 2000) as f32 / 1000.0 - 1.0;
+        for case in 0..200 {
+            let mut m = Matrix4::identity() * (0.5 + case as f32 / 200.0);
+            for r in 0..3 {
+                for c in 0..4 {
+                    m[(r, c)] += noise(16 * case + 4 * r + c) * 0.4;
+                }
+            }
+            if case % 7 == 0 {
+                m[(0, 0)] = -m[(0, 0)];
+            }
+            let n = [0, 1, 2].map(|a| noise(5000 + 3 * case + a));
+            let a: nalgebra::Matrix3<f32> = m.fixed_view::<3, 3>(0, 0).into_owned();
+            let expected: Vector3<f32> = (a.try_inverse().unwrap() * Vector3::from(n)).normalize();
+            let got = back_through(&m, n);
+            for k in 0..3 {
+                assert!(
+                    (got[k] - expected[k]).abs() < 1e-4,
+                    "{case}: {got:?} {expected:?}"
+                );
+            }
+        }
+        let mut flat = Matrix4::identity();
+        flat[(2, 2)] = 0.0;
+        assert_eq!(back_through(&flat, [0.0, 0.6, 0.8]), [0.0, 0.6, 0.8]);
     }
 
     #[test]

@@ -2,13 +2,20 @@
 //! the file (its base mesh, blend shapes, weights and skin, played by our LBS) against the
 //! network's own forward pass (its template, basis and slot skin on the MLP's coefficients).
 //! Both are formed a block of frames at a time, coordinate-major (`[3N][frames]`, one matrix
-//! product per block), so the skinning and the distances run over frames in SIMD lanes.
+//! product per block into a buffer reused across blocks), so the skinning and the distances run
+//! over frames in SIMD lanes: eight frames of one vertex, both sides skinned and compared in
+//! registers.
 
 use rayon::prelude::*;
 use tch::{Kind, Tensor};
 
 /// Frames per block: the lanes the skinning runs over.
 const BLOCK: usize = 64;
+
+/// Frames skinned together (one AVX register of f32).
+const LANES: usize = 8;
+
+type Lane = [f32; LANES];
 
 /// Vertices per parallel task.
 const VERTICES_PER_TASK: usize = 128;
@@ -34,19 +41,24 @@ pub struct Played<'a> {
 pub fn distances(a: &Played, b: &Played) -> Vec<(f32, f32)> {
     let frames = a.weights.size()[0] as usize;
     let n = a.rest.len() / 3;
-    let (sa, sb) = (lanes(a.skinning, frames), lanes(b.skinning, frames));
+    let (mut oa, mut ob) = (vec![0.0f32; 3 * n * BLOCK], vec![0.0f32; 3 * n * BLOCK]);
+    let (mut ja, mut jb) = (Vec::new(), Vec::new());
+    let fused = fused_kernel();
     let mut out = Vec::with_capacity(frames);
     for start in (0..frames).step_by(BLOCK) {
         let count = BLOCK.min(frames - start);
-        let (ra, rb) = (rest_block(a, start, count), rest_block(b, start, count));
-        let (side_a, side_b) = (Side::of(a, &sa, &ra, start), Side::of(b, &sb, &rb, start));
+        offsets_block(a, start, count, &mut oa);
+        offsets_block(b, start, count, &mut ob);
+        joint_blocks(a.skinning, frames, start, &mut ja);
+        joint_blocks(b.skinning, frames, start, &mut jb);
+        let (side_a, side_b) = (Side::of(a, &ja, &oa), Side::of(b, &jb, &ob));
         let tasks: Vec<([f32; BLOCK], [f32; BLOCK])> = (0..n)
             .step_by(VERTICES_PER_TASK)
             .collect::<Vec<_>>()
             .into_par_iter()
             .map(|first| {
                 let vertices = first..(first + VERTICES_PER_TASK).min(n);
-                block_distances(&side_a, &side_b, vertices, frames.next_multiple_of(BLOCK))
+                block_distances(&side_a, &side_b, vertices, fused)
             })
             .collect();
         // Summed in vertex order whatever the threads: the same figures every run.
@@ -59,63 +71,103 @@ pub fn distances(a: &Played, b: &Played) -> Vec<(f32, f32)> {
     out
 }
 
-/// Skinning matrices `[frames][J][12]` rearranged frame-minor, `[J][12][frames]`, the frames
-/// padded with zeros to whole blocks.
-fn lanes(skinning: &[f32], frames: usize) -> Vec<f32> {
-    let padded = frames.next_multiple_of(BLOCK);
+/// Frame lanes of a block.
+const CHUNKS: usize = BLOCK / LANES;
+
+/// One joint's skinning matrices (row-major 3 × 4) over a block of frames,
+/// `[lane chunk][element][lane]`: the twelve values one chunk of frames needs are contiguous.
+type JointBlock = [[Lane; 12]; CHUNKS];
+
+/// The skinning matrices `[frames][J][12]` of frames `start..start + BLOCK` into `out`, one
+/// [`JointBlock`] per joint (frames past the clip's end zero).
+fn joint_blocks(skinning: &[f32], frames: usize, start: usize, out: &mut Vec<JointBlock>) {
     let per_frame = skinning.len() / frames.max(1);
-    let mut out = vec![0.0f32; per_frame * padded];
-    for (f, rows) in skinning.chunks_exact(per_frame.max(1)).enumerate() {
-        for (e, &value) in rows.iter().enumerate() {
-            out[e * padded + f] = value;
+    out.clear();
+    out.resize(per_frame / 12, [[[0.0; LANES]; 12]; CHUNKS]);
+    for (i, rows) in skinning
+        .chunks_exact(per_frame.max(1))
+        .skip(start)
+        .take(BLOCK)
+        .enumerate()
+    {
+        let (chunk, lane) = (i / LANES, i % LANES);
+        for (joint, m) in out.iter_mut().zip(rows.chunks_exact(12)) {
+            for (e, &value) in m.iter().enumerate() {
+                joint[chunk][e][lane] = value;
+            }
         }
     }
-    out
 }
 
-/// `rest + weights · shapes` for frames `start..start + count`, coordinate-major
-/// `[N * 3][BLOCK]` (frames past the clip's end zero).
-fn rest_block(p: &Played, start: usize, count: usize) -> Vec<f32> {
-    let n3 = p.rest.len() as i64;
-    let points = tch::no_grad(|| {
-        let offsets = p
-            .shapes
-            .tr()
-            .matmul(&p.weights.narrow(0, start as i64, count as i64).tr());
-        let points = Tensor::from_slice(p.rest).view([n3, 1]) + offsets.to_kind(Kind::Float);
+/// `weights · shapes` for frames `start..start + count` into `out`, coordinate-major
+/// `[N * 3][BLOCK]` (frames past the clip's end zero); the rest points are added in the lanes.
+fn offsets_block(p: &Played, start: usize, count: usize, out: &mut [f32]) {
+    let n3 = p.rest.len();
+    assert_eq!(out.len(), n3 * BLOCK, "one block of offsets");
+    tch::no_grad(|| {
+        let mut weights = p.weights.narrow(0, start as i64, count as i64);
         if count < BLOCK {
-            points.constant_pad_nd([0, (BLOCK - count) as i64])
-        } else {
-            points
+            weights = weights.constant_pad_nd([0, 0, 0, (BLOCK - count) as i64]);
         }
+        let weights = weights.to_kind(Kind::Float);
+        // SAFETY: `out` is a live, exclusively borrowed f32 buffer of exactly n3 × BLOCK values
+        // (asserted above), row-major as the strides say; the tensor viewing it is written by
+        // the one product below and dropped at the end of this closure, before `out` is read.
+        let target = unsafe {
+            Tensor::from_blob(
+                out.as_mut_ptr().cast::<u8>(),
+                &[n3 as i64, BLOCK as i64],
+                &[BLOCK as i64, 1],
+                Kind::Float,
+                tch::Device::Cpu,
+            )
+        };
+        let _ = p
+            .shapes
+            .to_kind(Kind::Float)
+            .tr()
+            .matmul_out(&target, &weights.tr());
+        assert_eq!(
+            target.data_ptr().cast::<f32>(),
+            out.as_mut_ptr(),
+            "the product written in place"
+        );
     });
-    Vec::<f32>::try_from(&points.contiguous().view([-1])).expect("f32 points")
 }
 
-/// One side of a block: its rest points and skinning in lanes, and its slots.
+/// One side of a block: its rest points, offsets and skinning in lanes, and its slots.
 struct Side<'a> {
-    /// `[J][12][padded frames]`.
-    skinning: &'a [f32],
-    /// `[N * 3][BLOCK]`.
+    /// One per joint.
+    skinning: &'a [JointBlock],
+    /// `[N * 3]`.
     rest: &'a [f32],
+    /// `[N * 3][BLOCK]`.
+    offsets: &'a [[f32; BLOCK]],
     joints: &'a [usize],
     weights: &'a [f32],
     influences: usize,
-    /// First frame of the block.
-    frame: usize,
 }
 
 impl<'a> Side<'a> {
-    fn of(p: &Played<'a>, skinning: &'a [f32], rest: &'a [f32], frame: usize) -> Side<'a> {
+    fn of(p: &Played<'a>, skinning: &'a [JointBlock], offsets: &'a [f32]) -> Side<'a> {
         Side {
             skinning,
-            rest,
+            rest: p.rest,
+            offsets: offsets.as_chunks::<BLOCK>().0,
             joints: p.joints,
             weights: p.slot_weights,
             influences: p.influences,
-            frame,
         }
     }
+}
+
+/// Whether this CPU runs the fused-multiply-add kernel (AVX2 and FMA).
+fn fused_kernel() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        return true;
+    }
+    false
 }
 
 /// Largest and summed distance per frame of the block over `vertices`.
@@ -123,78 +175,102 @@ fn block_distances(
     a: &Side,
     b: &Side,
     vertices: std::ops::Range<usize>,
-    padded: usize,
+    fused: bool,
 ) -> ([f32; BLOCK], [f32; BLOCK]) {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU has AVX2 (checked just above), the only requirement of the function.
-        return unsafe { block_distances_avx2(a, b, vertices, padded) };
+    if fused {
+        // SAFETY: `fused` is true only where the CPU has AVX2 and FMA ([`fused_kernel`]), the
+        // function's only requirement.
+        return unsafe { block_distances_fma(a, b, vertices) };
     }
-    block_distances_portable(a, b, vertices, padded)
+    let _ = fused;
+    block_distances_lanes::<false>(a, b, vertices)
 }
 
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn block_distances_avx2(
+#[target_feature(enable = "avx2,fma")]
+fn block_distances_fma(
     a: &Side,
     b: &Side,
     vertices: std::ops::Range<usize>,
-    padded: usize,
 ) -> ([f32; BLOCK], [f32; BLOCK]) {
-    block_distances_portable(a, b, vertices, padded)
+    block_distances_lanes::<true>(a, b, vertices)
+}
+
+/// `a · b + c`, fused (one rounding) in the FMA kernel.
+#[inline(always)]
+fn madd<const FMA: bool>(a: f32, b: f32, c: f32) -> f32 {
+    if FMA {
+        a.mul_add(b, c)
+    } else {
+        a * b + c
+    }
 }
 
 #[inline(always)]
-fn block_distances_portable(
+fn block_distances_lanes<const FMA: bool>(
     a: &Side,
     b: &Side,
     vertices: std::ops::Range<usize>,
-    padded: usize,
 ) -> ([f32; BLOCK], [f32; BLOCK]) {
-    let (mut largest, mut sum) = ([0.0f32; BLOCK], [0.0f32; BLOCK]);
-    let (mut pa, mut pb) = ([[0.0f32; BLOCK]; 3], [[0.0f32; BLOCK]; 3]);
+    let (mut largest, mut sum) = ([[0.0f32; LANES]; CHUNKS], [[0.0f32; LANES]; CHUNKS]);
     for v in vertices {
-        skin_vertex(a, v, padded, &mut pa);
-        skin_vertex(b, v, padded, &mut pb);
-        for f in 0..BLOCK {
-            let d = ((pa[0][f] - pb[0][f]).powi(2)
-                + (pa[1][f] - pb[1][f]).powi(2)
-                + (pa[2][f] - pb[2][f]).powi(2))
-            .sqrt();
-            largest[f] = largest[f].max(d);
-            sum[f] += d;
+        for chunk in 0..CHUNKS {
+            let pa = skin_lanes::<FMA>(a, v, chunk);
+            let pb = skin_lanes::<FMA>(b, v, chunk);
+            let (largest, sum) = (&mut largest[chunk], &mut sum[chunk]);
+            for f in 0..LANES {
+                let (dx, dy, dz) = (
+                    pa[0][f] - pb[0][f],
+                    pa[1][f] - pb[1][f],
+                    pa[2][f] - pb[2][f],
+                );
+                let d = madd::<FMA>(dx, dx, madd::<FMA>(dy, dy, dz * dz)).sqrt();
+                largest[f] = largest[f].max(d);
+                sum[f] += d;
+            }
         }
     }
-    (largest, sum)
+    let flat = |lanes: [[f32; LANES]; CHUNKS]| -> [f32; BLOCK] {
+        lanes.as_flattened().try_into().expect("a block")
+    };
+    (flat(largest), flat(sum))
 }
 
-/// Linear blend skinning of vertex `v` over the block's frames: `Σ_s w_s (S_{j_s} · [r; 1])`.
+/// Linear blend skinning of vertex `v` over the frames of lane chunk `chunk`:
+/// `Σ_s w_s (S_{j_s} · [r; 1])`, `r` the rest point plus the frame's offset.
 #[inline(always)]
-fn skin_vertex(side: &Side, v: usize, padded: usize, out: &mut [[f32; BLOCK]; 3]) {
-    *out = [[0.0; BLOCK]; 3];
-    let rest = |axis: usize| -> &[f32; BLOCK] {
-        side.rest[(3 * v + axis) * BLOCK..(3 * v + axis + 1) * BLOCK]
-            .try_into()
-            .expect("a block")
+fn skin_lanes<const FMA: bool>(side: &Side, v: usize, chunk: usize) -> [Lane; 3] {
+    let point = |axis: usize| -> Lane {
+        let rest = side.rest[3 * v + axis];
+        side.offsets[3 * v + axis].as_chunks::<LANES>().0[chunk].map(|o| rest + o)
     };
-    let (x, y, z) = (rest(0), rest(1), rest(2));
+    let (x, y, z) = (point(0), point(1), point(2));
+    let mut out = [[0.0f32; LANES]; 3];
     for s in v * side.influences..(v + 1) * side.influences {
         let w = side.weights[s];
         if w == 0.0 {
             continue;
         }
-        let j = side.joints[s];
-        let m = |e: usize| -> &[f32; BLOCK] {
-            let at = (12 * j + e) * padded + side.frame;
-            side.skinning[at..at + BLOCK].try_into().expect("a block")
-        };
+        let m = &side.skinning[side.joints[s]][chunk];
         for (row, out) in out.iter_mut().enumerate() {
-            let (m0, m1, m2, m3) = (m(4 * row), m(4 * row + 1), m(4 * row + 2), m(4 * row + 3));
-            for f in 0..BLOCK {
-                out[f] += w * (m0[f] * x[f] + m1[f] * y[f] + m2[f] * z[f] + m3[f]);
+            let (m0, m1, m2, m3) = (
+                &m[4 * row],
+                &m[4 * row + 1],
+                &m[4 * row + 2],
+                &m[4 * row + 3],
+            );
+            for f in 0..LANES {
+                let p = if FMA {
+                    m0[f].mul_add(x[f], m1[f].mul_add(y[f], m2[f].mul_add(z[f], m3[f])))
+                } else {
+                    m0[f] * x[f] + m1[f] * y[f] + m2[f] * z[f] + m3[f]
+                };
+                out[f] = madd::<FMA>(w, p, out[f]);
             }
         }
     }
+    out
 }
 
 #[cfg(test)]
