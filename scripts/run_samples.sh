@@ -32,6 +32,6 @@ node tools/node/validate.mjs out/cc_base_002_01.glb
 
 echo "== what the job made: the trained skirt on 131_02 beside plain LBS of the same skirt, and a page that plays the bake"
 $gb preview --body samples/body.glb --motion samples/motions/131_02.bvh --model runs/skirt_quick.safetensors \
-  --lbs --frames 6 --out out/131_02_skirt_vs_lbs.png
+  --lbs --frame-count 6 --out out/131_02_skirt_vs_lbs.png
 $gb view out/skirt.glb --out out/skirt.html
 echo "outputs: $(cd out && ls | tr '\n' ' ')"

@@ -61,7 +61,7 @@ fn run<C: Execute>(command: &C, json: bool) -> Result<i32> {
     long_about = "Train neural garment deformers and bake them into standard files that any engine or DCC \
 plays back without a neural runtime.\n\nConventions: metres, Y-up, right-handed (glTF / USD). Inputs are \
 converted at the edges: BVH units are scaled to the body by hip height, MakeHuman decimetres to metres.",
-    after_help = "Typical session:\n  garmentbake inspect samples/body.glb\n  garmentbake pose --body samples/body.glb --motion samples/motions/131_01.bvh --out walk.glb\n  garmentbake preview --body samples/body.glb --motion samples/motions/131_01.bvh --frames 6 --out walk.png"
+    after_help = "Typical session:\n  garmentbake inspect samples/body.glb\n  garmentbake pose --body samples/body.glb --motion samples/motions/131_01.bvh --out walk.glb\n  garmentbake preview --body samples/body.glb --motion samples/motions/131_01.bvh --frame-count 6 --out walk.png"
 )]
 struct Cli {
     #[command(subcommand)]

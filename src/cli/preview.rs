@@ -62,10 +62,11 @@ pub struct Args {
     /// With --model: add a panel of plain LBS (proximity weights, no PSD) next to each one.
     #[arg(long, help_heading = "Outputs")]
     pub lbs: bool,
-    /// Number of frames, evenly spaced over the clip.
-    #[arg(long, default_value_t = 6, help_heading = "Outputs")]
-    pub frames: usize,
-    /// Explicit frame numbers instead of --frames, e.g. 0,120,240.
+    /// How many frames to show, evenly spaced over the clip (first and last included); each is
+    /// drawn in every --views. (`--frames` is its old name: elsewhere it means the first N.)
+    #[arg(long, alias = "frames", default_value_t = 6, help_heading = "Outputs")]
+    pub frame_count: usize,
+    /// Explicit frame numbers instead of --frame-count, e.g. 0,120,240.
     #[arg(long, value_delimiter = ',', help_heading = "Outputs")]
     pub frame_list: Vec<usize>,
     /// Views per frame: front, side, back, three-quarter.
@@ -156,7 +157,7 @@ impl Args {
             fps: self.fps,
             model: self.model.clone(),
             lbs: self.lbs,
-            frames: self.frames,
+            frames: self.frame_count,
             frame_list: self.frame_list.clone(),
             views: self.views.iter().map(|&v| v.into()).collect(),
             width: self.width,

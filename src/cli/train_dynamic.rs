@@ -66,7 +66,9 @@ pub struct Args {
     pub kernel_radius_mm: f64,
     #[command(flatten)]
     pub fabric: FabricArgs,
-    #[arg(long, default_value_t = 30)]
+    /// Epochs of the networks beside the linear paths (the space's, or the motion stage's).
+    /// 0, the recipe: the linear paths alone (docs/dynamic.md).
+    #[arg(long, default_value_t = 0)]
     pub epochs: usize,
     /// Frames per optimisation step (space 4, dynamic 8).
     #[arg(long)]

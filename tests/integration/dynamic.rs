@@ -1112,7 +1112,7 @@ fn a_latent_walk_ends_on_its_frames_and_previews_from_its_start() {
         a.extend_from_slice(extra);
         garmentbake_in_root(&a)
     };
-    let o = preview(&["--frames", "6"]);
+    let o = preview(&["--frame-count", "6"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(String::from_utf8_lossy(&o.stdout).contains("4 panels"));
     std::fs::remove_file(&png).unwrap();

@@ -138,3 +138,82 @@ fn usage_errors_are_one_line() {
     // Help still prints in full, and succeeds.
     assert!(garmentbake_ok(&["pose", "--help"]).contains("Usage:"));
 }
+
+/// One meaning per flag name (issue 39): the fabric is `--fabric` wherever a command takes one
+/// (`--config`, its old name, still parses but is not shown); `preview`'s count of evenly spaced
+/// frames is `--frame-count` (`--frames`, the first N everywhere else, still parses there but is
+/// not shown); the experiment flags not adopted are hidden; `train-dynamic --epochs` defaults
+/// to the recipe's 0.
+#[test]
+fn a_flag_name_means_one_thing_and_old_names_still_parse() {
+    let root = garmentbake::cli::command();
+    let sub = |name: &str| root.find_subcommand(name).unwrap().clone();
+    let arg = |cmd: &clap::Command, long: &str| {
+        cmd.get_arguments()
+            .find(|a| a.get_long() == Some(long))
+            .unwrap_or_else(|| panic!("{} has no --{long}", cmd.get_name()))
+            .clone()
+    };
+    let hidden_alias = |cmd: &clap::Command, long: &str, old: &str| {
+        let a = arg(cmd, long);
+        let all = a.get_all_aliases().unwrap_or_default();
+        assert!(all.contains(&old), "{} --{long}: {all:?}", cmd.get_name());
+        assert!(
+            a.get_visible_aliases().unwrap_or_default().is_empty(),
+            "{} --{old} shown",
+            cmd.get_name()
+        );
+    };
+    let mut fabrics = 0;
+    for cmd in root.get_subcommands() {
+        for a in cmd.get_arguments() {
+            assert_ne!(a.get_long(), Some("config"), "{} --config", cmd.get_name());
+        }
+        if cmd.get_arguments().any(|a| a.get_long() == Some("fabric")) {
+            hidden_alias(cmd, "fabric", "config");
+            fabrics += 1;
+        }
+    }
+    // train, simulate, train-dynamic when written.
+    assert!(fabrics >= 3, "{fabrics} commands with --fabric");
+    let preview = sub("preview");
+    hidden_alias(&preview, "frame-count", "frames");
+    assert!(preview
+        .get_arguments()
+        .all(|a| a.get_long() != Some("frames")));
+    // The old names parse to the same value as the new ones.
+    let parsed = |args: &[&str], id: &str| -> String {
+        let m = garmentbake::cli::command()
+            .try_get_matches_from(std::iter::once("garmentbake").chain(args.iter().copied()))
+            .unwrap_or_else(|e| panic!("{args:?}: {e}"));
+        let (_, m) = m.subcommand().unwrap();
+        m.get_raw(id)
+            .unwrap()
+            .next()
+            .unwrap()
+            .to_string_lossy()
+            .into_owned()
+    };
+    let preview_args = ["preview", "--body", "b.glb", "--out", "p.png"];
+    for flag in ["--frames", "--frame-count"] {
+        let args = [&preview_args[..], &[flag, "3"]].concat();
+        assert_eq!(parsed(&args, "frame_count"), "3", "{flag}");
+    }
+    let simulate_args = ["simulate", "--body", "b.glb", "--garment", "g.obj"];
+    for flag in ["--config", "--fabric"] {
+        let args = [
+            &simulate_args[..],
+            &["--motion", "m.bvh", "--out", "s.pc2", flag, "silk"],
+        ]
+        .concat();
+        assert_eq!(parsed(&args, "fabric"), "silk", "{flag}");
+    }
+    let dynamic = sub("train-dynamic");
+    for flag in ["rollout-window", "body-drive", "drive-ridge", "rollout-fix"] {
+        assert!(
+            arg(&dynamic, flag).is_hide_set(),
+            "train-dynamic --{flag} shown"
+        );
+    }
+    assert_eq!(arg(&dynamic, "epochs").get_default_values(), ["0"]);
+}
