@@ -262,7 +262,9 @@ pub struct SpaceTrainer {
     settings: Settings,
     adam: Adam,
     ops: MeshOps,
-    sdf: Sdf,
+    /// Built at the first network step: the exact distance grid costs seconds of winding
+    /// numbers, and the linear path (`--epochs 0`, the documented recipe) never reads it.
+    sdf: std::cell::OnceCell<Sdf>,
 }
 
 /// Reconstruction error of frames (per-vertex L2 distance).
@@ -334,7 +336,6 @@ impl SpaceTrainer {
             })
         }));
         let ops = MeshOps::new(&garment.mesh, device);
-        let sdf = Sdf::new(&body, &garment.mesh, device);
         let index = crate::geometry::PointIndex::new(&body.mesh.positions)?;
         let lbs = weights::smooth_garment_skin(
             &garment.mesh,
@@ -403,7 +404,7 @@ impl SpaceTrainer {
             settings,
             adam,
             ops,
-            sdf,
+            sdf: std::cell::OnceCell::new(),
         })
     }
 
@@ -426,6 +427,11 @@ impl SpaceTrainer {
             KindInfo::Dynamic(d) => d,
             KindInfo::Pbns(_) => unreachable!("a dynamic trainer holds a dynamic model"),
         }
+    }
+
+    fn sdf(&self) -> &Sdf {
+        self.sdf
+            .get_or_init(|| Sdf::new(&self.file.body, &self.file.garment, self.settings.device))
     }
 
     /// Cosine decay from the learning rate to a tenth of it.
@@ -461,10 +467,10 @@ impl SpaceTrainer {
         // 8.1 → 32 mm training error in 3 epochs).
         let eps = self.settings.sdf_margin as f64;
         let floor = tch::no_grad(|| {
-            self.sdf
+            self.sdf()
                 .at(&space.displaced(&space.rest_displacements(&g, &m)))
         });
-        let sdf = (floor.clamp_max(eps) - self.sdf.at(&canonical))
+        let sdf = (floor.clamp_max(eps) - self.sdf().at(&canonical))
             .relu()
             .mean(Kind::Float)
             * LAMBDA_SDF;
