@@ -235,9 +235,12 @@ fn a_character_creator_take_retargets_like_the_same_cmu_take() {
     );
     // Retargeting adds at most half a degree to what the exports already disagree by (the
     // CC export bends the knees ~5° more than the CMU one), and stays within 5° elsewhere.
+    // The sources' own figure is read by the same BVH code, so a break there moves both: it
+    // may lift the bar to 6° and no further (a folded joint's rotation dropped puts the hips
+    // 12–13° apart, with the sources then 12–14°).
     for ((name, deg), (_, src)) in r.angles.iter().zip(&own) {
         assert!(
-            *deg < 5.0_f32.max(src + 0.5),
+            *deg < 5.0_f32.max((src + 0.5).min(6.0)),
             "{name}: {deg:.2}° apart on average (the sources: {src:.2}°)"
         );
     }
