@@ -35,51 +35,50 @@ pub use crate::pipeline::train_dynamic::Report;
 #[derive(clap::Args)]
 pub struct Args {
     /// Skinned body (glTF/glb) the simulations used (stage space).
-    #[arg(long, required_if_eq("stage", "space"))]
+    #[arg(long, required_if_eq("stage", "space"), help_heading = "Inputs")]
     pub body: Option<PathBuf>,
     /// Garment mesh (OBJ with UVs) the simulations used (stage space).
-    #[arg(long, required_if_eq("stage", "space"))]
+    #[arg(long, required_if_eq("stage", "space"), help_heading = "Inputs")]
     pub garment: Option<PathBuf>,
     /// Stage dynamic: the model whose trained space the motion encoder builds on.
-    #[arg(long, required_if_eq("stage", "dynamic"))]
+    #[arg(long, required_if_eq("stage", "dynamic"), help_heading = "Inputs")]
     pub from: Option<PathBuf>,
     #[command(flatten)]
     pub clips: ClipArgs,
     /// The simulated garment of each --motion (.pc2 from `garmentbake simulate`), in order.
-    #[arg(long = "sim", required = true)]
+    #[arg(long = "sim", required = true, help_heading = "Inputs")]
     pub sims: Vec<PathBuf>,
     /// Stage to train.
-    #[arg(long, value_enum, default_value = "space")]
+    #[arg(long, value_enum, default_value = "space", help_heading = "Training")]
     pub stage: Stage,
     /// Network size: cpu (64² map, 128 seeds, ≤ 256 channels) or paper (128², 581, 1024: a GPU).
-    #[arg(long, default_value = "cpu")]
+    #[arg(long, default_value = "cpu", help_heading = "Training")]
     pub preset: String,
     /// Latent size (the preset's 64 when not given): the linear path starts as this many
     /// principal components of the training frames.
-    #[arg(long)]
+    #[arg(long, help_heading = "Training")]
     pub latent: Option<usize>,
     /// Stage space: initial kernel radius of the seed skinning (mm, every body part; learnt
     /// from there). Small: each garment vertex follows its nearest few seeds (a skirt's hem
     /// follows the thighs); large: it blends the seeds over a wider patch (the hem moves with
     /// the hips and both legs at once).
-    #[arg(long, default_value_t = 50.0, value_parser = super::args::positive::<f64>())]
+    #[arg(long, default_value_t = 50.0, value_parser = super::args::positive::<f64>(), help_heading = "Advanced")]
     pub kernel_radius_mm: f64,
     #[command(flatten)]
     pub fabric: FabricArgs,
-    /// Epochs of the networks beside the linear paths (the space's, or the motion stage's).
-    /// 0, the recipe: the linear paths alone (docs/dynamic.md).
-    #[arg(long, default_value_t = 0)]
+    /// Epochs of the networks beside the linear paths; 0, the recipe: the linear paths alone.
+    #[arg(long, default_value_t = 0, help_heading = "Training")]
     pub epochs: usize,
     /// Frames per optimisation step (space 4, dynamic 8).
-    #[arg(long)]
+    #[arg(long, help_heading = "Advanced")]
     pub batch: Option<usize>,
     /// Initial Adam learning rate, cosine decay to a tenth (space 3e-4, dynamic 1e-3).
-    #[arg(long, value_parser = super::args::positive::<f64>())]
+    #[arg(long, value_parser = super::args::positive::<f64>(), help_heading = "Advanced")]
     pub lr: Option<f64>,
     /// Stage dynamic: pull of the fitted latent integrator towards keeping the previous latent
     /// (relative ridge penalty); stronger is steadier over long roll-outs, weaker follows the
     /// simulation closer one step ahead.
-    #[arg(long, default_value_t = 0.1, value_parser = super::args::non_negative::<f64>())]
+    #[arg(long, default_value_t = 0.1, value_parser = super::args::non_negative::<f64>(), help_heading = "Advanced")]
     pub ridge: f64,
     /// Stage dynamic: rounds of roll-out-aware fitting. Each round rolls the model out over the
     /// training clips (no collision fix) and refits the latent integrator on those self-made
@@ -88,7 +87,7 @@ pub struct Args {
     /// roll-out of all training frames. 0: the teacher-forced fit alone (closest one step ahead).
     /// Default: 0 when settling towards the pose (it keeps roll-outs stable by itself), 3 with
     /// --no-pose-settle.
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", help_heading = "Advanced")]
     pub rollout_rounds: Option<usize>,
     /// Stage dynamic: settling time towards the pose, in seconds (not in the paper). The
     /// integrator's prediction is blended with the garment the body's pose alone predicts (a
@@ -97,16 +96,16 @@ pub struct Args {
     /// start for the first frames and cannot run away over long shots. Longer: more of the
     /// history's motion kept, more room to drift; 0: the pose alone. The regression's ridge is
     /// chosen leaving one training clip out. Implies --body-drive.
-    #[arg(long, default_value_t = 0.3, value_name = "SECONDS", value_parser = super::args::non_negative::<f64>())]
+    #[arg(long, default_value_t = 0.3, value_name = "SECONDS", value_parser = super::args::non_negative::<f64>(), help_heading = "Training")]
     pub pose_settle: f64,
     /// Stage dynamic: no settling, the paper's integrator alone (with --rollout-rounds 3 by
     /// default to keep it stable).
-    #[arg(long, conflicts_with = "pose_settle")]
+    #[arg(long, conflicts_with = "pose_settle", help_heading = "Training")]
     pub no_pose_settle: bool,
     /// Stage dynamic, settling: the pose regression's ridge, relative to each pose input's mean
     /// square. Default: the one of 1e-3, 0.01, 0.1, 1, 10 whose fit on all training clips but
     /// one best predicts the clip left out (one clip: its halves).
-    #[arg(long, value_name = "R", value_parser = super::args::non_negative::<f64>())]
+    #[arg(long, value_name = "R", value_parser = super::args::non_negative::<f64>(), help_heading = "Advanced")]
     pub pose_ridge: Option<f64>,
     /// Stage dynamic: the rounds' roll-outs run the collision fix, as `rollout` plays the
     /// model, so the integrator is refitted on the histories it meets at play time (the fix
@@ -139,14 +138,15 @@ pub struct Args {
     /// clips (windows growing from --unroll-frames' first to its last length, noise on each
     /// window's start; loss: decoded mm and velocity). 0: the linear integrator alone. Its last
     /// layer starts at zero, so it only adds what the roll-outs teach it.
-    #[arg(long, default_value_t = 0, value_name = "N")]
+    #[arg(long, default_value_t = 0, value_name = "N", help_heading = "Training")]
     pub dynamics_epochs: usize,
     /// Stage dynamic, with --dynamics-epochs: hidden layer widths of the learnt dynamics.
     #[arg(
         long,
         value_delimiter = ',',
         default_value = "128,128",
-        value_name = "W,W"
+        value_name = "W,W",
+        help_heading = "Advanced"
     )]
     pub dynamics_widths: Vec<usize>,
     /// Stage dynamic, with --dynamics-epochs: window length of the roll-outs it is fitted
@@ -155,38 +155,40 @@ pub struct Args {
         long,
         value_delimiter = ',',
         default_value = "8,32",
-        value_name = "FIRST,LAST"
+        value_name = "FIRST,LAST",
+        help_heading = "Advanced"
     )]
     pub unroll_frames: Vec<usize>,
     /// Stage dynamic, with --dynamics-epochs: noise on each window's starting latent, in units
     /// of the training latents' spread.
-    #[arg(long, default_value_t = 0.05, value_parser = super::args::non_negative::<f64>())]
+    #[arg(long, default_value_t = 0.05, value_parser = super::args::non_negative::<f64>(), help_heading = "Advanced")]
     pub dynamics_noise: f64,
     /// Stage dynamic, with --dynamics-epochs: past frames of the body's motion (root and joint
     /// rotations and their speeds, as the body drive has them) the learnt dynamics also see,
     /// so a swing can answer the body's acceleration (8: 0.27 s at 30 fps, the measured recipe
     /// of docs/dynamic.md). 0: the current frame's alone.
     #[arg(long, default_value_t = 8, value_name = "FRAMES")]
+    #[arg(help_heading = "Training")]
     pub dynamics_history: usize,
     /// Stage dynamic: channels of the motion features `E_t`.
-    #[arg(long, default_value_t = 16)]
+    #[arg(long, default_value_t = 16, help_heading = "Advanced")]
     pub motion_features: usize,
     /// Seed: same seed and inputs → the same model.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, help_heading = "Training")]
     pub seed: u64,
     /// A clip held out from training and its simulation: reconstruction error reported on it.
-    #[arg(long, requires = "eval_sim")]
+    #[arg(long, requires = "eval_sim", help_heading = "Inputs")]
     pub eval_motion: Option<PathBuf>,
-    #[arg(long, requires = "eval_motion")]
+    #[arg(long, requires = "eval_motion", help_heading = "Inputs")]
     pub eval_sim: Option<PathBuf>,
     /// Output model (.safetensors).
-    #[arg(long)]
+    #[arg(long, help_heading = "Outputs")]
     pub out: PathBuf,
     /// Continue from OUT's checkpoint up to --epochs.
-    #[arg(long)]
+    #[arg(long, help_heading = "Outputs")]
     pub resume: bool,
     /// Append one JSON object per epoch to this file.
-    #[arg(long)]
+    #[arg(long, help_heading = "Outputs")]
     pub log: Option<PathBuf>,
     #[command(flatten)]
     pub compute: ComputeArgs,
@@ -198,19 +200,17 @@ impl Execute for Args {
     type Report = Report;
 
     fn execute(&self, say: &dyn Fn(&str)) -> Result<Report> {
-        // Checked before the training; the trainer writes the model (and its checkpoints)
-        // atomically itself, as it goes.
+        // Checked first; the trainer writes the model and its checkpoints atomically itself.
         let _checked = output_set(&[
             ("--out", Some(&self.out), MODEL),
             ("--log", self.log.as_deref(), Writes::Any),
         ])?;
-        let c = &self.clips;
         let request = Request {
             stage: self.stage,
             body: self.body.clone(),
             garment: self.garment.clone(),
             from: self.from.clone(),
-            clips: c.clips(),
+            clips: self.clips.clips(),
             sims: self.sims.clone(),
             preset: self.preset.clone(),
             latent: self.latent,
