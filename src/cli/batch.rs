@@ -43,7 +43,7 @@ struct PlanArgs {
     /// The manifest (TOML).
     manifest: PathBuf,
     /// Output folder (default: the manifest's `out`).
-    #[arg(long)]
+    #[arg(long, help_heading = "Outputs")]
     out: Option<PathBuf>,
     #[command(flatten)]
     output: OutputArgs,

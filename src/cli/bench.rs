@@ -60,15 +60,15 @@ struct SwingBench {
 #[derive(clap::Args)]
 struct BakeBench {
     /// Trained PBNS model (.safetensors).
-    #[arg(long)]
+    #[arg(long, help_heading = "Inputs")]
     model: PathBuf,
     #[command(flatten)]
     clips: super::args::ClipArgs,
     /// Blend shapes to keep (as `bake --max-targets`).
-    #[arg(long, default_value_t = 64)]
+    #[arg(long, default_value_t = 64, help_heading = "Outputs")]
     max_targets: usize,
     /// Skip Blender's export.
-    #[arg(long)]
+    #[arg(long, help_heading = "Advanced")]
     no_blender: bool,
     #[command(flatten)]
     compute: ComputeArgs,
@@ -79,24 +79,24 @@ struct BakeBench {
 #[derive(clap::Args)]
 struct RolloutBench {
     /// Dynamic model with its motion stage.
-    #[arg(long)]
+    #[arg(long, help_heading = "Inputs")]
     model: PathBuf,
     /// The body to simulate on (glTF), the one the model was trained with.
-    #[arg(long)]
+    #[arg(long, help_heading = "Inputs")]
     body: PathBuf,
     /// The garment to simulate (OBJ/USD with its sidecar), the model's.
-    #[arg(long)]
+    #[arg(long, help_heading = "Inputs")]
     garment: PathBuf,
     /// The clip (one --motion), played at the model's rate.
-    #[arg(long)]
+    #[arg(long, help_heading = "Inputs")]
     motion: PathBuf,
     /// Joint-name map(s) (TOML) for the clip.
-    #[arg(long = "map")]
+    #[arg(long = "map", help_heading = "Inputs")]
     maps: Vec<PathBuf>,
     #[command(flatten)]
     fabric: FabricArgs,
     /// Frames of the clip, from its start.
-    #[arg(long, default_value_t = 60)]
+    #[arg(long, default_value_t = 60, help_heading = "Inputs")]
     frames: usize,
     #[command(flatten)]
     collision: CollisionFixArgs,

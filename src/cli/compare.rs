@@ -25,52 +25,52 @@ use std::path::PathBuf;
 #[derive(clap::Args)]
 pub struct Args {
     /// Skinned body (glTF/glb) the caches were played on.
-    #[arg(long)]
+    #[arg(long, help_heading = "Inputs")]
     pub body: PathBuf,
     /// The garment (OBJ or USD) the caches play; its lowest boundary loop is the hem.
-    #[arg(long)]
+    #[arg(long, help_heading = "Inputs")]
     pub garment: PathBuf,
     /// The clip (one --motion), at the caches' rate (--fps).
     #[command(flatten)]
     pub clips: ClipArgs,
     /// A simulation of the clip (PC2); give two or more, three or more for a ceiling.
-    #[arg(long = "sim", value_name = "SIM.pc2")]
+    #[arg(long = "sim", value_name = "SIM.pc2", help_heading = "Inputs")]
     pub sims: Vec<PathBuf>,
     /// A cache to compare, named: NAME=PATH.pc2 (repeat).
-    #[arg(long = "cache", value_name = "NAME=CACHE.pc2")]
+    #[arg(long = "cache", value_name = "NAME=CACHE.pc2", help_heading = "Inputs")]
     pub caches: Vec<String>,
     /// The dynamic model that played a cache, NAME=MODEL.safetensors: e(k) restarts it from each
     /// simulation's state instead of reading the cache.
-    #[arg(long = "model", value_name = "NAME=MODEL")]
+    #[arg(long = "model", value_name = "NAME=MODEL", help_heading = "Inputs")]
     pub models: Vec<String>,
     /// The quasi-static cache (by NAME) the hem's swing is measured beyond; without it, the
     /// hem's motion in the waist frame as it is.
-    #[arg(long, value_name = "NAME")]
+    #[arg(long, value_name = "NAME", help_heading = "Inputs")]
     pub baseline: Option<String>,
     /// Compare only the clip's first N frames (caches of the whole clip or of N frames).
-    #[arg(long)]
+    #[arg(long, help_heading = "Inputs")]
     pub frames: Option<usize>,
     /// e(k) for k = 1 … N frames.
-    #[arg(long, default_value_t = 50)]
+    #[arg(long, default_value_t = 50, help_heading = "Advanced")]
     pub horizon: usize,
     /// Restarts at frames 0, N, 2N, … (each followed by --horizon frames).
-    #[arg(long, default_value_t = 50)]
+    #[arg(long, default_value_t = 50, help_heading = "Advanced")]
     pub restart_every: usize,
     /// The hem's lag behind the pelvis is looked for within ± this many seconds.
-    #[arg(long, default_value_t = 1.0, value_parser = super::args::positive::<f32>())]
+    #[arg(long, default_value_t = 1.0, value_parser = super::args::positive::<f32>(), help_heading = "Advanced")]
     pub max_lag: f32,
     /// Also score the simulations' vertex-wise mean garment (as `runs-mean`): the blurred
     /// average that wins whole-clip distance without being a garment, for scale.
-    #[arg(long)]
+    #[arg(long, help_heading = "Advanced")]
     pub with_mean: bool,
     /// Draw e(k) beside the simulations' divergence (PNG).
-    #[arg(long, value_name = "PNG")]
+    #[arg(long, value_name = "PNG", help_heading = "Outputs")]
     pub plot_horizon: Option<PathBuf>,
     /// Draw the hem's swing over time and its spectrum (PNG).
-    #[arg(long, value_name = "PNG")]
+    #[arg(long, value_name = "PNG", help_heading = "Outputs")]
     pub plot_hem: Option<PathBuf>,
     /// Restarted models play without the per-frame collision fix.
-    #[arg(long)]
+    #[arg(long, help_heading = "Advanced")]
     pub no_collision_fix: bool,
     #[command(flatten)]
     pub collision: CollisionFixArgs,

@@ -24,24 +24,24 @@ use std::path::PathBuf;
 #[derive(clap::Args)]
 pub struct Args {
     /// Dynamic model (.safetensors); the space stage is enough.
-    #[arg(long)]
+    #[arg(long, help_heading = "Inputs")]
     pub model: PathBuf,
     /// The simulated clip (BVH), resampled to the model's rate.
-    #[arg(long)]
+    #[arg(long, help_heading = "Inputs")]
     pub motion: PathBuf,
     /// Joint-name map(s) for the clip (TOML).
-    #[arg(long = "map")]
+    #[arg(long = "map", help_heading = "Inputs")]
     pub maps: Vec<PathBuf>,
     /// The clip's simulation (.pc2 from `garmentbake simulate`, at the model's rate; its first
     /// frames are enough).
-    #[arg(long)]
+    #[arg(long, help_heading = "Inputs")]
     pub sim: PathBuf,
     /// The two clip frames, A,B (A < B), e.g. 40,70.
-    #[arg(long, value_delimiter = ',', required = true)]
+    #[arg(long, value_delimiter = ',', required = true, help_heading = "Inputs")]
     pub between: Vec<usize>,
     /// Output point cache (.pc2, .mdd, .usda/.usdc/.usd, .abc, .vat.exr/.vat.png), samples for
     /// frames A..=B.
-    #[arg(long)]
+    #[arg(long, help_heading = "Outputs")]
     pub out: PathBuf,
     #[command(flatten)]
     pub space: super::args::CacheSpaceArgs,

@@ -34,58 +34,58 @@ pub use crate::pipeline::rollout::report::Report;
 #[derive(clap::Args)]
 pub struct Args {
     /// Dynamic model with its motion stage (.safetensors).
-    #[arg(long)]
+    #[arg(long, help_heading = "Inputs")]
     pub model: PathBuf,
     /// BVH clip(s), played one after another.
-    #[arg(long = "motion", required = true)]
+    #[arg(long = "motion", required = true, help_heading = "Inputs")]
     pub motions: Vec<PathBuf>,
     /// Joint-name map(s) (TOML) for the clips.
-    #[arg(long = "map")]
+    #[arg(long = "map", help_heading = "Inputs")]
     pub maps: Vec<PathBuf>,
     /// Where the roll-out starts: `rest` (the rest garment on the first pose, at rest) or a point
     /// cache whose first frame is the starting garment (e.g. the clip's simulation).
-    #[arg(long, default_value = "rest")]
+    #[arg(long, default_value = "rest", help_heading = "Inputs")]
     pub init: String,
     /// Play only the first N frames (of the clips in a row).
-    #[arg(long)]
+    #[arg(long, help_heading = "Inputs")]
     pub frames: Option<usize>,
     /// Frames over which a later clip blends in from the previous clip's last pose.
-    #[arg(long, default_value_t = 15)]
+    #[arg(long, default_value_t = 15, help_heading = "Advanced")]
     pub fade: usize,
     /// Output: a point cache (.pc2, .mdd, .usda/.usdc, .abc: time-sampled points; .vat.exr /
     /// .vat.png: vertex animation textures with their normals, JSON and glb), or a compressed
     /// glTF (.glb/.gltf: the garment skinned to the body's skeleton plus blend shapes from the
     /// singular directions of its un-skinned residual over the roll-out, their weights animated;
     /// plays in any glTF viewer).
-    #[arg(long)]
+    #[arg(long, help_heading = "Outputs")]
     pub out: PathBuf,
     /// glTF output: keep the fewest blend shapes whose replay stays within this distance (mm) of
     /// every rolled-out vertex (and --validate's limit).
-    #[arg(long, default_value_t = 1.0, value_parser = super::args::positive::<f32>())]
+    #[arg(long, default_value_t = 1.0, value_parser = super::args::positive::<f32>(), help_heading = "Outputs")]
     pub tolerance_mm: f32,
     /// glTF output: keep this many blend shapes (the strongest; 8 is what every glTF client
     /// must support) instead of a tolerance; the replay error they cost is printed.
-    #[arg(long, conflicts_with = "tolerance_mm")]
+    #[arg(long, conflicts_with = "tolerance_mm", help_heading = "Outputs")]
     pub max_targets: Option<usize>,
     /// glTF output: store the blend shapes as 32-bit floats instead of 16-bit integers. By
     /// default they are quantized (KHR_mesh_quantization: half the bytes, the rounding counted
     /// in --tolerance-mm), which three.js and Blender read (both checked) as do most engines'
     /// glTF loaders; this flag is for readers without that extension.
-    #[arg(long)]
+    #[arg(long, help_heading = "Outputs")]
     pub float_targets: bool,
     /// Also write the posed body per frame as a point cache.
-    #[arg(long)]
+    #[arg(long, help_heading = "Outputs")]
     pub body_out: Option<PathBuf>,
     /// USD or Alembic --out: put the posed body in the same stage / archive, beside the garment
     /// (`/NAME/garment`, `/NAME/body`, one timeline), so the shot opens in usdview or a DCC with
     /// the body it was rolled out on.
-    #[arg(long)]
+    #[arg(long, help_heading = "Outputs")]
     pub with_body: bool,
     /// A simulated cache of the same (single) clip to measure the roll-out against (and plain
     /// LBS beside it). Repeat for several simulations of the clip: the roll-out against each and
     /// against their mean, and the simulations against each other (their own spread); the
     /// first is the one --restart-every and --view use.
-    #[arg(long = "reference", value_name = "SIM.pc2")]
+    #[arg(long = "reference", value_name = "SIM.pc2", help_heading = "Inputs")]
     pub references: Vec<PathBuf>,
     /// With --reference: also roll the model out afresh every N frames of the clip, each time
     /// from the reference's own state there (its last three frames: the garment starts moving
@@ -94,24 +94,29 @@ pub struct Args {
     /// a clip whose lead-ins differ by 0.1 s can end centimetres apart); the restarts measure the
     /// model's dynamics over N frames at every part of the clip instead (the paper's
     /// "rollout-50", taken all along the clip).
-    #[arg(long, value_name = "N", requires = "references")]
+    #[arg(
+        long,
+        value_name = "N",
+        requires = "references",
+        help_heading = "Advanced"
+    )]
     pub restart_every: Option<usize>,
     /// Also write plain linear blend skinning of the rest garment (the fixed skin of the glTF
     /// output: proximity weights, no dynamics) per frame as a point cache, the baseline to
     /// compare with (e.g. `preview --side-by-side`).
-    #[arg(long, value_name = "LBS.pc2")]
+    #[arg(long, value_name = "LBS.pc2", help_heading = "Outputs")]
     pub lbs_out: Option<PathBuf>,
     /// Also write a page that plays the roll-out on the body in a browser (see `view`); with
     /// --reference, the simulation beside it and error colours against it.
-    #[arg(long, value_name = "PAGE.html")]
+    #[arg(long, value_name = "PAGE.html", help_heading = "Outputs")]
     pub view: Option<PathBuf>,
     /// Check what was written as `garmentbake validate` does: its structure, and that it plays
     /// the roll-out just computed within --tolerance-mm at every frame (a glTF evaluated as the
     /// spec says, a point cache read back); exit 1 when it fails.
-    #[arg(long)]
+    #[arg(long, help_heading = "Outputs")]
     pub validate: bool,
     /// Skip the per-frame collision fix.
-    #[arg(long)]
+    #[arg(long, help_heading = "Advanced")]
     pub no_collision_fix: bool,
     #[command(flatten)]
     pub collision: CollisionFixArgs,

@@ -19,7 +19,7 @@ pub struct Args {
     /// The model file (.safetensors).
     pub model: PathBuf,
     /// Write the upgraded file here instead of replacing MODEL (atomically either way).
-    #[arg(long)]
+    #[arg(long, help_heading = "Outputs")]
     pub out: Option<PathBuf>,
     #[command(flatten)]
     pub output: OutputArgs,
