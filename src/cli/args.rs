@@ -108,6 +108,14 @@ pub struct CollisionFixArgs {
 }
 
 impl CollisionFixArgs {
+    /// The ids of its flags (for [`short_help`]'s `hidden`, where the fix is not the point).
+    pub fn ids() -> Vec<String> {
+        let cmd = <Self as clap::Args>::augment_args(clap::Command::new("fix"));
+        cmd.get_arguments()
+            .map(|a| a.get_id().to_string())
+            .collect()
+    }
+
     /// Roll-out settings with the fix on (`fix`) or off, checked.
     pub fn settings(&self, fix: bool) -> Result<crate::rollout::Settings> {
         let w = self.collision_edge_weight;
@@ -129,6 +137,27 @@ impl CollisionFixArgs {
         })
     }
 }
+
+/// `-h` for the common path (issue 39), for a command's `#[command(mut_args(...))]`: the flags
+/// under "Advanced" and the ids in `brief` are left out of `-h` (`--help` shows them); the ids in
+/// `hidden` are shown by neither, and still parse.
+pub fn short_help(brief: &[&str], hidden: Vec<String>) -> impl FnMut(clap::Arg) -> clap::Arg {
+    let brief: Vec<String> = brief.iter().map(|s| s.to_string()).collect();
+    move |a| {
+        let id = a.get_id().to_string();
+        if hidden.contains(&id) {
+            a.hide(true)
+        } else if a.get_help_heading() == Some("Advanced") || brief.contains(&id) {
+            a.hide_short_help(true)
+        } else {
+            a
+        }
+    }
+}
+
+/// What the help says under the flags when [`short_help`] left some out of `-h`.
+pub const SHORT_HELP_NOTE: &str = "-h shows the common flags; --help shows every flag (the \
+Advanced ones too) and the full descriptions.";
 
 /// The fabric of a garment: its physical parameters, and with `simulate` Blender's cloth
 /// settings (the fabric file's [simulate] table).

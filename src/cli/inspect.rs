@@ -18,22 +18,22 @@ use std::path::{Path, PathBuf};
 pub struct Args {
     /// File to describe (.glb, .gltf, .bvh, .obj, .safetensors).
     pub file: PathBuf,
-    /// Print JSON instead of text.
-    #[arg(long)]
-    pub json: bool,
     /// BVH: also read the clip onto this body (.glb) and print what each clip joint became (the
     /// rig joint it drives, folded, dropped), the map, up axis, units and rest pose.
-    #[arg(long)]
+    #[arg(long, help_heading = "Inputs")]
     pub body: Option<PathBuf>,
     /// BVH with --body: joint map(s) to try first (see `garmentbake map suggest`).
-    #[arg(long = "map", requires = "body")]
+    #[arg(long = "map", requires = "body", help_heading = "Inputs")]
     pub maps: Vec<PathBuf>,
     /// BVH with --body: the clip's up axis (detected when left out).
-    #[arg(long, requires = "body", value_parser = super::args::parse_up)]
+    #[arg(long, requires = "body", value_parser = super::args::parse_up, help_heading = "Inputs")]
     pub up: Option<crate::rig::capture::UpAxis>,
     /// BVH with --body: the clip's length unit (detected when left out).
-    #[arg(long, requires = "body", value_parser = super::args::parse_units)]
+    #[arg(long, requires = "body", value_parser = super::args::parse_units, help_heading = "Inputs")]
     pub units: Option<crate::rig::capture::Units>,
+    /// Print JSON instead of text.
+    #[arg(long, help_heading = "Outputs")]
+    pub json: bool,
 }
 
 impl Execute for Args {

@@ -31,10 +31,10 @@ pub struct SuggestArgs {
     /// The clip (.bvh).
     pub clip: PathBuf,
     /// Write the draft here (.toml) instead of printing it.
-    #[arg(long)]
+    #[arg(long, help_heading = "Outputs")]
     pub out: Option<PathBuf>,
     /// Print the report as JSON.
-    #[arg(long)]
+    #[arg(long, help_heading = "Outputs")]
     pub json: bool,
 }
 

@@ -1,9 +1,8 @@
 //! `garmentbake train-dynamic`: the motion-guided dynamic model, trained on simulated clips
 //! (library: src/pipeline/train_dynamic.rs).
 
-use super::args::{
-    output_set, ClipArgs, CollisionFixArgs, ComputeArgs, FabricArgs, OutputArgs, Writes, MODEL,
-};
+use super::args::{output_set, short_help, ClipArgs, CollisionFixArgs, ComputeArgs, FabricArgs};
+use super::args::{OutputArgs, Writes, MODEL, SHORT_HELP_NOTE};
 use super::Execute;
 use crate::pipeline::train_dynamic::{run, Request, Stage};
 use crate::pipeline::Feedback;
@@ -11,6 +10,10 @@ use anyhow::Result;
 use std::path::PathBuf;
 
 pub use crate::pipeline::train_dynamic::Report;
+
+/// The flags (ids) `-h` leaves out besides the Advanced ones; the collision fix's, which only the
+/// hidden --rollout-fix uses, are hidden from `--help` too (both in `#[command]` below).
+const SHORT_HIDES: [&str; 5] = ["maps", "up", "units", "latent", "dynamics_history"];
 
 /// Train the dynamic garment model on cloth simulations (`garmentbake simulate`).
 ///
@@ -33,6 +36,8 @@ pub use crate::pipeline::train_dynamic::Report;
 /// --eval-motion/--eval-sim on a clip it never saw. A checkpoint is written next to --out every
 /// epoch; --resume continues from it.
 #[derive(clap::Args)]
+#[command(after_help = SHORT_HELP_NOTE)]
+#[command(mut_args(short_help(&SHORT_HIDES, CollisionFixArgs::ids())))]
 pub struct Args {
     /// Skinned body (glTF/glb) the simulations used (stage space).
     #[arg(long, required_if_eq("stage", "space"), help_heading = "Inputs")]
@@ -89,13 +94,14 @@ pub struct Args {
     /// --no-pose-settle.
     #[arg(long, value_name = "N", help_heading = "Advanced")]
     pub rollout_rounds: Option<usize>,
-    /// Stage dynamic: settling time towards the pose, in seconds (not in the paper). The
-    /// integrator's prediction is blended with the garment the body's pose alone predicts (a
-    /// ridge regression on the simulated frames), so whatever the history carries — a
-    /// simulated start, a swing, a drift — fades to 1/e in this time: roll-outs follow a known
-    /// start for the first frames and cannot run away over long shots. Longer: more of the
-    /// history's motion kept, more room to drift; 0: the pose alone. The regression's ridge is
-    /// chosen leaving one training clip out. Implies --body-drive.
+    /// Stage dynamic: settling time towards the pose, in seconds (not in the paper).
+    ///
+    /// The integrator's prediction is blended with the garment the body's pose alone predicts (a
+    /// ridge regression on the simulated frames), so whatever the history carries — a simulated
+    /// start, a swing, a drift — fades to 1/e in this time: roll-outs follow a known start for
+    /// the first frames and cannot run away over long shots. Longer: more of the history's
+    /// motion kept, more room to drift; 0: the pose alone. The regression's ridge is chosen
+    /// leaving one training clip out. Implies --body-drive.
     #[arg(long, default_value_t = 0.3, value_name = "SECONDS", value_parser = super::args::non_negative::<f64>(), help_heading = "Training")]
     pub pose_settle: f64,
     /// Stage dynamic: no settling, the paper's integrator alone (with --rollout-rounds 3 by
@@ -119,7 +125,7 @@ pub struct Args {
     /// clips.
     #[arg(long, default_value_t = 0, value_name = "N", hide = true)]
     pub rollout_window: usize,
-    /// With --rollout-fix: the fix as `rollout` runs it.
+    /// With --rollout-fix: the fix as `rollout` runs it (hidden with it).
     #[command(flatten)]
     pub collision: CollisionFixArgs,
     /// Stage dynamic (not in the paper): feed the latent integrator the body drive too — the
@@ -133,31 +139,22 @@ pub struct Args {
     /// steering it).
     #[arg(long, default_value_t = 1.0, value_parser = super::args::non_negative::<f64>(), hide = true)]
     pub drive_ridge: f64,
-    /// Stage dynamic (not in the paper): epochs of the learnt latent dynamics, a small network
-    /// beside the linear integrator fitted through the model's own roll-outs of the training
-    /// clips (windows growing from --unroll-frames' first to its last length, noise on each
-    /// window's start; loss: decoded mm and velocity). 0: the linear integrator alone. Its last
-    /// layer starts at zero, so it only adds what the roll-outs teach it.
+    /// Stage dynamic (not in the paper): epochs of the learnt latent dynamics.
+    ///
+    /// A small network beside the linear integrator, fitted through the model's own roll-outs of
+    /// the training clips (windows growing from --unroll-frames' first to its last length, noise
+    /// on each window's start; loss: decoded mm and velocity). 0: the linear integrator alone.
+    /// Its last layer starts at zero, so it only adds what the roll-outs teach it.
     #[arg(long, default_value_t = 0, value_name = "N", help_heading = "Training")]
     pub dynamics_epochs: usize,
     /// Stage dynamic, with --dynamics-epochs: hidden layer widths of the learnt dynamics.
-    #[arg(
-        long,
-        value_delimiter = ',',
-        default_value = "128,128",
-        value_name = "W,W",
-        help_heading = "Advanced"
-    )]
+    #[arg(long, value_delimiter = ',', value_name = "W,W")]
+    #[arg(default_value = "128,128", help_heading = "Advanced")]
     pub dynamics_widths: Vec<usize>,
     /// Stage dynamic, with --dynamics-epochs: window length of the roll-outs it is fitted
     /// through, at the first and the last epoch (frames).
-    #[arg(
-        long,
-        value_delimiter = ',',
-        default_value = "8,32",
-        value_name = "FIRST,LAST",
-        help_heading = "Advanced"
-    )]
+    #[arg(long, value_delimiter = ',', value_name = "FIRST,LAST")]
+    #[arg(default_value = "8,32", help_heading = "Advanced")]
     pub unroll_frames: Vec<usize>,
     /// Stage dynamic, with --dynamics-epochs: noise on each window's starting latent, in units
     /// of the training latents' spread.
@@ -179,6 +176,7 @@ pub struct Args {
     /// A clip held out from training and its simulation: reconstruction error reported on it.
     #[arg(long, requires = "eval_sim", help_heading = "Inputs")]
     pub eval_motion: Option<PathBuf>,
+    /// The simulation of --eval-motion (.pc2).
     #[arg(long, requires = "eval_motion", help_heading = "Inputs")]
     pub eval_sim: Option<PathBuf>,
     /// Output model (.safetensors).
