@@ -8,6 +8,7 @@
 #   bash scripts/compare_dynamic.sh CLIP OUT_PREFIX NAME=MODEL.safetensors [NAME=MODEL ...]
 #   e.g. bash scripts/compare_dynamic.sh 002_04 runs/cmp_002_04 linear=runs/dyn/linear.safetensors
 #   NAME=eval:MODEL plays a PBNS or a swing (train-swing) with `eval` instead of `rollout`.
+#   NO_HORIZON=1 leaves out e(k) (the restarts, most of the time): a quick look at b, hem, strain.
 #
 # CLIP is 131_02 (samples/motions) or a take of ../shared/data/mocap/cc_base; runs are read from
 # runs/dynamic_set/CLIP_skirt_sim_p{0,1,2}.pc2 and PBNS from runs/dynamic_set/CLIP_pbns.pc2.
@@ -35,7 +36,9 @@ for spec in "$@"; do
     *)
         "$GB" rollout --model "$model" --motion "$BVH" --init "$D/${CLIP}_skirt_sim_p0.pc2" \
             --out "${OUT}_$name.pc2" --quiet > "${OUT}_$name.txt"
-        ARGS+=(--cache "$name=${OUT}_$name.pc2" --model "$name=$model")
+        ARGS+=(--cache "$name=${OUT}_$name.pc2")
+        # e(k) restarts the model from the runs' states: most of compare's time.
+        [ -n "${NO_HORIZON:-}" ] || ARGS+=(--model "$name=$model")
         ;;
     esac
 done
