@@ -408,7 +408,7 @@ impl Request {
             crate::train::Training::save(&mut trainer, &self.out, false)?;
         }
         let dynamic = trainer.dynamic();
-        let train_err = one_step(dynamic, &trainer.data, fps)?;
+        let train_err = one_step_with_bar(dynamic, &trainer.data, fps, feedback.hide_bars)?;
         let mut eval_rollout = None;
         let eval = eval
             .map(|s| {
@@ -436,7 +436,8 @@ impl Request {
                 let n = data.len() as i64 - 1;
                 let (rolled, truth) = (rolled.narrow(0, 1, n), data.garment.narrow(0, 1, n));
                 eval_rollout = Some((s.name.clone(), Reconstruction::of(&rolled, &truth)));
-                Ok::<_, anyhow::Error>((s.name.clone(), one_step(dynamic, &data, fps)?))
+                let err = one_step_with_bar(dynamic, &data, fps, feedback.hide_bars)?;
+                Ok::<_, anyhow::Error>((s.name.clone(), err))
             })
             .transpose()?;
         let info = trainer.file.info.dynamic()?;
@@ -602,6 +603,22 @@ fn roll_clips(
         predicted: index(&predicted),
         back: back.map(|b| index(&b)),
     })
+}
+
+/// [`one_step`] with a progress bar: on a many-take set it is minutes of work after the fit.
+fn one_step_with_bar(
+    dynamic: &crate::models::dynamic::Dynamic,
+    data: &FrameData,
+    fps: f64,
+    hide_bar: bool,
+) -> Result<Reconstruction> {
+    let bar = crate::progress::bar(data.len() as u64, "one-step error", hide_bar);
+    let err = one_step(dynamic, data, fps, &mut |done, total| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    })?;
+    bar.finish_and_clear();
+    Ok(err)
 }
 
 fn radii_mm(info: &crate::models::file::DynamicInfo) -> Vec<(String, f64)> {

@@ -513,8 +513,14 @@ pub fn vertex_distance(a: &Tensor, b: &Tensor) -> Tensor {
 }
 
 /// One-step predictions (teacher-forced histories) of every frame that has a previous frame in
-/// its clip, against the simulation.
-pub fn one_step(dynamic: &Dynamic, data: &FrameData, fps: f64) -> Result<Reconstruction> {
+/// its clip, against the simulation; `progress(done, total)` after each chunk of frames
+/// (minutes on a 20-take set: every frame blends its seeds four times).
+pub fn one_step(
+    dynamic: &Dynamic,
+    data: &FrameData,
+    fps: f64,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Reconstruction> {
     let encoder = dynamic.motion()?;
     let space = &dynamic.space;
     let history = history_indices(data, space.consts.rest.device());
@@ -525,7 +531,9 @@ pub fn one_step(dynamic: &Dynamic, data: &FrameData, fps: f64) -> Result<Reconst
         let h = teacher_history(data, &history, &idx, fps);
         let x = motion_inputs(space, &h, &encoder.shape, None);
         let z = encoder.latent(&x, Some(&encoder.dynamic_features(space, &x)));
-        space.skin(&space.canonical(&z), &h.now.transforms)
+        let skinned = space.skin(&space.canonical(&z), &h.now.transforms);
+        progress(s + n, frames.len());
+        skinned
     });
     let truth = data.garment.index_select(0, &idx_all);
     Ok(Reconstruction::of(&pred, &truth))
