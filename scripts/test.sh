@@ -25,13 +25,6 @@ bash tools/selftest.sh target/selftest >/dev/null
 stage "build the tests"
 RUST_TEST_THREADS=2 cargo test --workspace --quiet --no-run
 stage "unit and integration tests"
-# Each test's time (libtest's --report-time, a nightly option the stable harness runs under
-# RUSTC_BOOTSTRAP; the build above is not redone), and the slowest ones at the end: where to
-# cut when the suite outgrows its 30 minutes.
-times=target/test-times.log
-RUST_TEST_THREADS=2 RUSTC_BOOTSTRAP=1 cargo test --workspace -- -Z unstable-options --report-time \
-    2>&1 | tee "$times" | grep -v ' \.\.\. ok <'
+RUST_TEST_THREADS=2 cargo test --workspace --quiet
 stage done
-echo "slowest tests (of $(grep -c ' \.\.\. ok <' "$times")):"
-sed -n 's/^test \(.*\) \.\.\. ok <\([0-9.]*\)s>$/\2 \1/p' "$times" | sort -rn | head -n 15
 echo "all tests passed"
