@@ -69,12 +69,14 @@ struct RunArgs {
 #[derive(clap::Args)]
 struct JobArgs {
     /// A plan saved by `batch plan --json` or `batch run` (OUT/plan.json).
-    #[arg(long)]
+    #[arg(long, help_heading = "Inputs")]
     plan: PathBuf,
     /// The job's id.
-    #[arg(long)]
+    #[arg(long, help_heading = "Inputs")]
     id: String,
-    #[arg(long, default_value_t = 0)]
+    /// Runs the job again if it crashed or was killed (not if it reported bad input or a failed
+    /// check), up to this many times (as `batch run --retries`).
+    #[arg(long, default_value_t = 0, help_heading = "Advanced")]
     retries: usize,
 }
 

@@ -2,7 +2,8 @@
 //! `garmentbake bench rollout`: a dynamic model's roll-out against Blender's cloth solver on the
 //! same frames, in the same run. `bench swing`: the swing trainer's setup and epochs.
 
-use super::args::{CollisionFixArgs, ComputeArgs, FabricArgs, OutputArgs, TrainInputs};
+use super::args::{short_help, CollisionFixArgs, ComputeArgs, FabricArgs, OutputArgs};
+use super::args::{TrainInputs, SHORT_HELP_NOTE, TRAIN_SHORT_HIDES};
 use super::Execute;
 use crate::bake::compress::Targets;
 use crate::pipeline::bench_rollout::{self, RolloutTimes};
@@ -107,14 +108,16 @@ struct RolloutBench {
 }
 
 #[derive(clap::Args)]
+#[command(after_help = SHORT_HELP_NOTE)]
+#[command(mut_args(short_help(&TRAIN_SHORT_HIDES, Vec::new())))]
 struct TrainBench {
     #[command(flatten)]
     inputs: TrainInputs,
     /// Timed steps (0: one refresh cycle, `--refresh-every` epochs of steps).
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, help_heading = "Training")]
     steps: usize,
     /// Untimed steps first (allocator and cache warm-up).
-    #[arg(long, default_value_t = 5)]
+    #[arg(long, default_value_t = 5, help_heading = "Training")]
     warmup: usize,
     #[command(flatten)]
     output: OutputArgs,

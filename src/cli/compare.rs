@@ -1,12 +1,16 @@
 //! `garmentbake compare`: caches of one clip against perturbed simulations of it, measured so
 //! that dynamics show (library: src/pipeline/compare.rs, src/compare.rs).
 
-use super::args::{output_set, ClipArgs, CollisionFixArgs, ComputeArgs, OutputArgs, PNG};
+use super::args::{output_set, short_help, ClipArgs, CollisionFixArgs, ComputeArgs, OutputArgs};
+use super::args::{PNG, SHORT_HELP_NOTE};
 use super::Execute;
 use crate::compare::{Report, Settings};
 use crate::pipeline::compare::{run, Request};
 use anyhow::{bail, Result};
 use std::path::PathBuf;
+
+/// The flags (ids) `-h` leaves out besides the Advanced ones (`--help` shows them).
+const SHORT_HIDES: [&str; 2] = ["up", "units"];
 
 /// Compare garment caches of one clip (a dynamic roll-out, PBNS, plain LBS, another simulation)
 /// against three or more perturbed simulations of it (`simulate --perturb 0/1/2`).
@@ -23,6 +27,8 @@ use std::path::PathBuf;
 /// correlation is the ceiling), amplitude ratio, lag behind the pelvis' velocity, power
 /// spectrum; and strain mean / p99, inside the body, jitter. See docs/dynamic.md.
 #[derive(clap::Args)]
+#[command(after_help = SHORT_HELP_NOTE)]
+#[command(mut_args(short_help(&SHORT_HIDES, Vec::new())))]
 pub struct Args {
     /// Skinned body (glTF/glb) the caches were played on.
     #[arg(long, help_heading = "Inputs")]

@@ -2,7 +2,8 @@
 //! cache (PC2, MDD, USD) or a compressed glTF, with its errors against reference simulations
 //! (library: src/pipeline/rollout/).
 
-use super::args::{output_set, CollisionFixArgs, ComputeArgs, OutputArgs, Writes, POINT_CACHE};
+use super::args::{output_set, short_help, CollisionFixArgs, ComputeArgs, OutputArgs, Writes};
+use super::args::{POINT_CACHE, SHORT_HELP_NOTE};
 use super::Execute;
 use crate::bake::compress::Targets;
 use crate::pipeline::rollout::{run, Request};
@@ -12,6 +13,9 @@ use exporters::FileKind;
 use std::path::PathBuf;
 
 pub use crate::pipeline::rollout::report::Report;
+
+/// The flags (ids) `-h` leaves out besides the Advanced ones (`--help` shows them).
+const SHORT_HIDES: [&str; 3] = ["float_targets", "out_units", "out_up"];
 
 /// Play a dynamic garment model (`train-dynamic --stage dynamic`) over motion clips.
 ///
@@ -32,6 +36,8 @@ pub use crate::pipeline::rollout::report::Report;
 /// longer) also measure how far apart they are: a loose garment is chaotic, and a roll-out as
 /// far from them as they are from each other is as close as a re-run of the simulator.
 #[derive(clap::Args)]
+#[command(after_help = SHORT_HELP_NOTE)]
+#[command(mut_args(short_help(&SHORT_HIDES, Vec::new())))]
 pub struct Args {
     /// Dynamic model with its motion stage (.safetensors).
     #[arg(long, help_heading = "Inputs")]
@@ -42,8 +48,10 @@ pub struct Args {
     /// Joint-name map(s) (TOML) for the clips.
     #[arg(long = "map", help_heading = "Inputs")]
     pub maps: Vec<PathBuf>,
-    /// Where the roll-out starts: `rest` (the rest garment on the first pose, at rest) or a point
-    /// cache whose first frame is the starting garment (e.g. the clip's simulation).
+    /// Where the roll-out starts: `rest` or a point cache whose first frame is the start.
+    ///
+    /// `rest`: the rest garment on the first pose, at rest; a point cache: its first frame is the
+    /// starting garment (e.g. the clip's simulation).
     #[arg(long, default_value = "rest", help_heading = "Inputs")]
     pub init: String,
     /// Play only the first N frames (of the clips in a row).
@@ -52,19 +60,22 @@ pub struct Args {
     /// Frames over which a later clip blends in from the previous clip's last pose.
     #[arg(long, default_value_t = 15, help_heading = "Advanced")]
     pub fade: usize,
-    /// Output: a point cache (.pc2, .mdd, .usda/.usdc, .abc: time-sampled points; .vat.exr /
-    /// .vat.png: vertex animation textures with their normals, JSON and glb), or a compressed
-    /// glTF (.glb/.gltf: the garment skinned to the body's skeleton plus blend shapes from the
-    /// singular directions of its un-skinned residual over the roll-out, their weights animated;
-    /// plays in any glTF viewer).
+    /// Output: a point cache (.pc2, .mdd, .usda/.usdc, .abc, .vat.exr/.vat.png) or a glTF (.glb).
+    ///
+    /// .pc2, .mdd, .usda/.usdc, .abc: time-sampled points; .vat.exr / .vat.png: vertex animation
+    /// textures with their normals, JSON and glb; .glb/.gltf: a compressed glTF, the garment
+    /// skinned to the body's skeleton plus blend shapes from the singular directions of its
+    /// un-skinned residual over the roll-out, their weights animated (plays in any glTF viewer).
     #[arg(long, help_heading = "Outputs")]
     pub out: PathBuf,
     /// glTF output: keep the fewest blend shapes whose replay stays within this distance (mm) of
     /// every rolled-out vertex (and --validate's limit).
     #[arg(long, default_value_t = 1.0, value_parser = super::args::positive::<f32>(), help_heading = "Outputs")]
     pub tolerance_mm: f32,
-    /// glTF output: keep this many blend shapes (the strongest; 8 is what every glTF client
-    /// must support) instead of a tolerance; the replay error they cost is printed.
+    /// glTF output: keep this many blend shapes instead of a tolerance.
+    ///
+    /// The strongest ones (8 is what every glTF client must support); the replay error they cost
+    /// is printed.
     #[arg(long, conflicts_with = "tolerance_mm", help_heading = "Outputs")]
     pub max_targets: Option<usize>,
     /// glTF output: store the blend shapes as 32-bit floats instead of 16-bit integers. By
@@ -76,15 +87,18 @@ pub struct Args {
     /// Also write the posed body per frame as a point cache.
     #[arg(long, help_heading = "Outputs")]
     pub body_out: Option<PathBuf>,
-    /// USD or Alembic --out: put the posed body in the same stage / archive, beside the garment
-    /// (`/NAME/garment`, `/NAME/body`, one timeline), so the shot opens in usdview or a DCC with
+    /// USD or Alembic --out: put the posed body in the same stage / archive, beside the garment.
+    ///
+    /// `/NAME/garment`, `/NAME/body`, one timeline, so the shot opens in usdview or a DCC with
     /// the body it was rolled out on.
     #[arg(long, help_heading = "Outputs")]
     pub with_body: bool,
-    /// A simulated cache of the same (single) clip to measure the roll-out against (and plain
-    /// LBS beside it). Repeat for several simulations of the clip: the roll-out against each and
-    /// against their mean, and the simulations against each other (their own spread); the
-    /// first is the one --restart-every and --view use.
+    /// A simulated cache of the same (single) clip to measure the roll-out against (repeat).
+    ///
+    /// The roll-out (and plain LBS beside it) is measured against it. Repeat for several
+    /// simulations of the clip: the roll-out against each and against their mean, and the
+    /// simulations against each other (their own spread); the first is the one --restart-every
+    /// and --view use.
     #[arg(long = "reference", value_name = "SIM.pc2", help_heading = "Inputs")]
     pub references: Vec<PathBuf>,
     /// With --reference: also roll the model out afresh every N frames of the clip, each time
@@ -101,18 +115,21 @@ pub struct Args {
         help_heading = "Advanced"
     )]
     pub restart_every: Option<usize>,
-    /// Also write plain linear blend skinning of the rest garment (the fixed skin of the glTF
-    /// output: proximity weights, no dynamics) per frame as a point cache, the baseline to
-    /// compare with (e.g. `preview --side-by-side`).
+    /// Also write plain linear blend skinning of the rest garment per frame (the baseline).
+    ///
+    /// The fixed skin of the glTF output (proximity weights, no dynamics) as a point cache, the
+    /// baseline to compare with (e.g. `preview --side-by-side`).
     #[arg(long, value_name = "LBS.pc2", help_heading = "Outputs")]
     pub lbs_out: Option<PathBuf>,
-    /// Also write a page that plays the roll-out on the body in a browser (see `view`); with
-    /// --reference, the simulation beside it and error colours against it.
+    /// Also write a page that plays the roll-out on the body in a browser (see `view`).
+    ///
+    /// With --reference, the simulation beside it and error colours against it.
     #[arg(long, value_name = "PAGE.html", help_heading = "Outputs")]
     pub view: Option<PathBuf>,
-    /// Check what was written as `garmentbake validate` does: its structure, and that it plays
-    /// the roll-out just computed within --tolerance-mm at every frame (a glTF evaluated as the
-    /// spec says, a point cache read back); exit 1 when it fails.
+    /// Check what was written as `garmentbake validate` does; exit 1 when it fails.
+    ///
+    /// Its structure, and that it plays the roll-out just computed within --tolerance-mm at every
+    /// frame (a glTF evaluated as the spec says, a point cache read back).
     #[arg(long, help_heading = "Outputs")]
     pub validate: bool,
     /// Skip the per-frame collision fix.

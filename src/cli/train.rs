@@ -1,6 +1,7 @@
 //! `garmentbake train`: unsupervised PBNS training of a garment on a body and motion clips.
 
-use super::args::{output_set, OutputArgs, TrainInputs, Writes, MODEL, TRAIN_DEFAULTS};
+use super::args::{output_set, short_help, OutputArgs, TrainInputs, Writes, MODEL};
+use super::args::{SHORT_HELP_NOTE, TRAIN_DEFAULTS, TRAIN_SHORT_HIDES};
 use super::Execute;
 use crate::models::file::EpochRecord;
 use crate::train::pbns::{PhaseSplit, Trainer};
@@ -28,6 +29,8 @@ use std::path::PathBuf;
 /// forward, losses, nearest neighbour, backward), validation, candidate refresh, checkpoints,
 /// logging; `--log` has the same per epoch.
 #[derive(clap::Args)]
+#[command(after_help = SHORT_HELP_NOTE)]
+#[command(mut_args(short_help(&TRAIN_SHORT_HIDES, Vec::new())))]
 pub struct Args {
     #[command(flatten)]
     pub inputs: TrainInputs,
@@ -41,8 +44,10 @@ pub struct Args {
     #[arg(long, help_heading = "Training")]
     pub resume: bool,
     /// Write the checkpoint after this many epochs (50), this much wall time (300s, 5m) or
-    /// whichever comes first (50,5m); always after the last epoch. A checkpoint of a wide model
-    /// holds tens of MB of optimizer state, so writing one every epoch costs real time.
+    /// whichever comes first (50,5m).
+    ///
+    /// Always after the last epoch too. A checkpoint of a wide model holds tens of MB of
+    /// optimizer state, so writing one every epoch costs real time.
     #[arg(
         long,
         default_value = "5m",
@@ -56,10 +61,12 @@ pub struct Args {
     /// Append one JSON object per epoch (loss terms, metrics, learning rate, seconds) to this file.
     #[arg(long, help_heading = "Outputs")]
     pub log: Option<PathBuf>,
-    /// Early stopping: stop once this many epochs pass without a lower validation loss (the
-    /// training potential on the held-out poses, computed every --validate-every epochs), and
-    /// write the best validated epoch's weights as OUT. The learning-rate schedule still spans
-    /// --epochs, so a run that stops early stops at a higher rate than the schedule's end.
+    /// Early stopping: stop once this many epochs pass without a lower validation loss.
+    ///
+    /// The validation loss is the training potential on the held-out poses, computed every
+    /// --validate-every epochs; the best validated epoch's weights are written as OUT. The
+    /// learning-rate schedule still spans --epochs, so a run that stops early stops at a higher
+    /// rate than the schedule's end.
     #[arg(long, value_name = "EPOCHS", value_parser = clap::value_parser!(u64).range(1..), help_heading = "Training")]
     pub patience: Option<u64>,
     #[command(flatten)]

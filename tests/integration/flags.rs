@@ -221,7 +221,7 @@ fn a_flag_name_means_one_thing_and_old_names_still_parse() {
 /// A command that groups its flags under headings (Inputs, Outputs, Training, Advanced) groups
 /// all of them: no flag is left in the plain "Options" list but --quiet and --help, and no
 /// other heading name is used (a shared flag struct's heading used to run on past it). Every
-/// command with flags groups them, but `batch job` (what a Ray task or a farm job calls).
+/// command with flags groups them, `batch job` (what a Ray task or a farm job calls) too.
 #[test]
 fn grouped_commands_put_every_flag_under_a_known_heading() {
     fn walk(cmd: &clap::Command, path: &str, bad: &mut Vec<String>, grouped: &mut Vec<String>) {
@@ -246,63 +246,107 @@ fn grouped_commands_put_every_flag_under_a_known_heading() {
     let (mut bad, mut grouped) = (Vec::new(), Vec::new());
     let root = garmentbake::cli::command();
     walk(&root, "garmentbake", &mut bad, &mut grouped);
-    bad.retain(|b| !b.starts_with("garmentbake batch job "));
     assert!(bad.is_empty(), "flags outside the headings: {bad:#?}");
     // pose, preview, train, eval, bake, simulate, train-dynamic, rollout, compare, ... when written
-    // (22 commands with flags, `batch job` among them); inspect and map suggest last.
+    // (22 commands with flags, `batch job` among them); inspect and map suggest, then batch job,
+    // last.
     assert!(grouped.len() >= 20, "{grouped:?} grouped commands");
-    for path in ["inspect", "map suggest", "train-dynamic"] {
+    for path in ["inspect", "map suggest", "train-dynamic", "batch job"] {
         let path = format!("garmentbake {path}");
         assert!(grouped.contains(&path), "{path} not checked: {grouped:?}");
     }
 }
 
-/// `train-dynamic -h` fits on one screen for the common path (issue 39: 137 lines before, 49 when
-/// written): the Advanced flags and a few rare inputs are left out of it, and it says that
-/// `--help` shows them; every flag it leaves out is in `--help`; the collision fix's flags,
-/// which only the hidden --rollout-fix uses, are in neither, and still parse.
+/// `-h` fits on one screen for every command (issue 39; before: train-dynamic 137 lines, train
+/// 106, rollout 103, bench train 90, compare 78; at most 52 when written at 100 columns): the
+/// Advanced flags and a few rare ones are left out of it, and it then says that `--help` shows
+/// them; every flag it leaves out is in `--help`. The flags hidden from both still parse: the
+/// collision fix's in train-dynamic, which only its hidden --rollout-fix uses.
 #[test]
-fn train_dynamic_short_help_fits_a_screen_and_long_help_has_every_flag() {
-    let help = |flag: &str| {
+fn every_short_help_fits_a_screen_and_long_help_has_every_flag() {
+    fn walk(cmd: &clap::Command, words: &[String], out: &mut Vec<(Vec<String>, clap::Command)>) {
+        out.push((words.to_vec(), cmd.clone()));
+        for sub in cmd.get_subcommands() {
+            let w = [words, &[sub.get_name().to_string()]].concat();
+            walk(sub, &w, out);
+        }
+    }
+    let help = |words: &[String], flag: &str| {
         let out = std::process::Command::new(env!("CARGO_BIN_EXE_garmentbake"))
-            .args(["train-dynamic", flag])
+            .args(words)
+            .arg(flag)
             .env("COLUMNS", "100")
             .output()
             .expect("run garmentbake");
-        assert!(out.status.success(), "train-dynamic {flag}");
+        assert!(out.status.success(), "{words:?} {flag}");
         String::from_utf8_lossy(&out.stdout).into_owned()
     };
-    let (short, long) = (help("-h"), help("--help"));
-    let lines = short.lines().count();
-    assert!(lines <= 70, "train-dynamic -h is {lines} lines:\n{short}");
-    assert!(short.contains("--help shows every flag"), "{short}");
-    // A flag's own line: clap indents it by six spaces (wrapped help lines are indented more).
-    let lists = |text: &str, long: &str| {
-        let head = format!("      --{long}");
+    // A flag's own line: clap indents it by six spaces, or two before a short flag (wrapped help
+    // lines are indented more).
+    let lists = |text: &str, a: &clap::Arg| {
+        let long = a.get_long().unwrap();
+        let heads = [
+            format!("      --{long}"),
+            format!("  -{}, --{long}", a.get_short().unwrap_or('?')),
+        ];
         text.lines().any(|l| {
-            l.strip_prefix(&head)
-                .is_some_and(|rest| rest.is_empty() || rest.starts_with([' ', '<']))
+            heads.iter().any(|head| {
+                l.strip_prefix(head.as_str())
+                    .is_some_and(|rest| rest.is_empty() || rest.starts_with([' ', '<']))
+            })
         })
     };
-    let root = garmentbake::cli::command();
-    let dynamic = root.find_subcommand("train-dynamic").unwrap();
+    let mut commands = Vec::new();
+    walk(&garmentbake::cli::command(), &[], &mut commands);
     let (mut left_out, mut hidden) = (Vec::new(), Vec::new());
-    for a in dynamic.get_arguments() {
-        let Some(name) = a.get_long() else { continue };
-        let shown = (lists(&short, name), lists(&long, name));
-        if a.is_hide_set() {
-            assert_eq!(shown, (false, false), "--{name} is hidden");
-            hidden.push(name);
-        } else if a.is_hide_short_help_set() {
-            assert_eq!(shown, (false, true), "--{name}: in --help alone");
-            left_out.push(name);
-        } else {
-            assert_eq!(shown, (true, true), "--{name}: in both");
+    for (words, cmd) in &commands {
+        let name = format!("garmentbake {}", words.join(" "))
+            .trim_end()
+            .to_string();
+        let (short, long) = (help(words, "-h"), help(words, "--help"));
+        let lines = short.lines().count();
+        assert!(lines <= 70, "{name} -h is {lines} lines:\n{short}");
+        let mut some_left_out = false;
+        for a in cmd.get_arguments().filter(|a| a.get_long().is_some()) {
+            let flag = format!("{name} --{}", a.get_long().unwrap());
+            let shown = (lists(&short, a), lists(&long, a));
+            if a.is_hide_set() {
+                assert_eq!(shown, (false, false), "{flag} is hidden");
+                hidden.push(flag);
+            } else if a.is_hide_short_help_set() {
+                assert_eq!(shown, (false, true), "{flag}: in --help alone");
+                left_out.push(flag);
+                some_left_out = true;
+            } else {
+                assert_eq!(shown, (true, true), "{flag}: in both");
+            }
+        }
+        if some_left_out {
+            assert!(
+                short.contains("--help shows every flag"),
+                "{name} -h:\n{short}"
+            );
         }
     }
-    // 19 left out of -h when written (Advanced, --map, --up, --units, --latent,
-    // --dynamics-history); a floor so that the check cannot pass by checking none.
-    assert!(left_out.len() >= 15, "{left_out:?}");
+    // 28 commands and subcommands when written; floors so that the walk cannot pass by finding
+    // none.
+    assert!(commands.len() >= 25, "{} commands", commands.len());
+    // Left out of -h when written: train-dynamic 17, train 17, bench train 17, rollout 14,
+    // compare 15.
+    for (command, floor) in [
+        ("train-dynamic", 15),
+        ("train", 15),
+        ("bench train", 15),
+        ("rollout", 10),
+        ("compare", 10),
+    ] {
+        let prefix = format!("garmentbake {command} --");
+        let n = left_out.iter().filter(|f| f.starts_with(&prefix)).count();
+        assert!(
+            n >= floor,
+            "{command}: {n} flags left out of -h: {left_out:#?}"
+        );
+    }
     for flag in [
         "collision-solver",
         "collision-iterations",
@@ -312,7 +356,8 @@ fn train_dynamic_short_help_fits_a_screen_and_long_help_has_every_flag() {
         "strain-band-pct",
         "rollout-fix",
     ] {
-        assert!(hidden.contains(&flag), "--{flag} shown: hidden {hidden:?}");
+        let flag = format!("garmentbake train-dynamic --{flag}");
+        assert!(hidden.contains(&flag), "{flag} shown: hidden {hidden:#?}");
     }
     let args = "garmentbake train-dynamic --stage dynamic --from s.safetensors --motion m.bvh \
                 --sim m.pc2 --out d.safetensors --rollout-fix --collision-solver paper \

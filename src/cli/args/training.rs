@@ -9,6 +9,23 @@ use std::path::PathBuf;
 /// The documented training defaults, shared with the library (`Settings::DEFAULT`).
 pub const TRAIN_DEFAULTS: Settings = Settings::DEFAULT;
 
+/// The flags (ids) of [`TrainInputs`] that `-h` leaves out besides the Advanced ones, for
+/// [`super::short_help`]: the clips' axis and unit (detected), and the finer training settings
+/// (`--help` shows them).
+pub const TRAIN_SHORT_HIDES: [&str; 11] = [
+    "up",
+    "units",
+    "influences",
+    "fixed_weights",
+    "pose_threshold",
+    "pose_budget",
+    "recombine",
+    "coverage",
+    "weights_lr_scale",
+    "inpaint_beyond",
+    "no_inpaint",
+];
+
 /// Inputs and settings shared by `train` and `bench train`.
 #[derive(clap::Args)]
 pub struct TrainInputs {
