@@ -54,15 +54,15 @@ struct RunArgs {
     #[command(flatten)]
     plan: PlanArgs,
     /// Jobs run at the same time (each uses the manifest's `threads`).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, help_heading = "Running")]
     jobs: usize,
     /// Runs again a job that crashed or was killed (not one that reported bad input or a failed
     /// check) up to this many times.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, help_heading = "Running")]
     retries: usize,
     /// Run on the Ray cluster at this address (HOST:PORT of `ray start --head`) instead of here;
     /// the binary, inputs and output folder must be on a path every node sees.
-    #[arg(long, value_name = "ADDRESS")]
+    #[arg(long, value_name = "ADDRESS", help_heading = "Running")]
     ray: Option<String>,
 }
 
