@@ -234,7 +234,10 @@ fn grouped_commands_put_every_flag_under_a_known_heading() {
             grouped.push(path.to_string());
             for a in &visible {
                 let h = a.get_help_heading();
-                if !matches!(h, Some("Inputs" | "Outputs" | "Training" | "Running" | "Advanced")) {
+                if !matches!(
+                    h,
+                    Some("Inputs" | "Outputs" | "Training" | "Running" | "Advanced")
+                ) {
                     bad.push(format!("{path} --{}: {h:?}", a.get_long().unwrap()));
                 }
             }
