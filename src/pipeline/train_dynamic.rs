@@ -576,9 +576,11 @@ fn roll_clips(
             let from = start.saturating_sub(2);
             let base = garments.len() as i64 - from as i64;
             let init = Init::Moving(s.garment[from..=start].to_vec());
+            let lead = crate::rollout::restart_lead(file, start)?;
             let rolled = for_model(
                 file,
-                &poses[start..=end],
+                &poses[start - lead..=end],
+                lead,
                 &init,
                 settings.clone(),
                 &mut |f| done(played + f),

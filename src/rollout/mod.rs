@@ -159,8 +159,10 @@ pub struct GarmentShape<'a> {
     pub pinned: &'a [u32],
 }
 
-/// Rolls `model` out over `poses` (at `fps`, the model's rate). `progress` is called after
-/// every frame.
+/// Rolls `model` out over `poses[first..]` (at `fps`, the model's rate): the poses before
+/// `first` are the body's known past (a restart inside a clip), whose drives the learnt
+/// dynamics read ([`Dynamic::past_drives`]); the garment starts at `first` from `init`.
+/// `progress` is called after every frame, counted from `first`.
 #[allow(clippy::too_many_arguments)]
 pub fn roll_out(
     model: &Dynamic,
@@ -168,6 +170,7 @@ pub fn roll_out(
     anchors: &BodyAnchors,
     garment: &GarmentShape,
     poses: &[Vec<JointTransform>],
+    first: usize,
     fps: f64,
     init: &Init,
     settings: &Settings,
@@ -177,7 +180,7 @@ pub fn roll_out(
     let space = &model.space;
     let linear_only = model.linear_only();
     let device = space.consts.rest.device();
-    if poses.is_empty() {
+    if first >= poses.len() {
         bail!("nothing to roll out: the clip has no frames");
     }
     let bodies = BodyFrames::new(body, anchors, poses, device);
@@ -185,16 +188,16 @@ pub fn roll_out(
     let at = |f: usize| bodies.select(&Tensor::from_slice(&[f as i64]).to_device(device));
     let start: Vec<Vec<[f32; 3]>> = match init {
         Init::Rest => vec![tch::no_grad(|| {
-            to_points(&space.skin(&space.consts.rest.unsqueeze(0), &at(0).transforms))
+            to_points(&space.skin(&space.consts.rest.unsqueeze(0), &at(first).transforms))
         })],
         Init::Moving(frames) => frames[frames.len().saturating_sub(HISTORY)..].to_vec(),
     };
-    let Some(first) = start.last().cloned() else {
+    let Some(initial) = start.last().cloned() else {
         bail!("the roll-out's start has no garment");
     };
     let limit = StrainLimit::new(garment.rest, garment.triangles, garment.pinned);
     let shape = (settings.solver == Solver::Paper).then(|| ShapeTerms {
-        laplacian: MeshLaplacian::new(garment.triangles, first.len(), device),
+        laplacian: MeshLaplacian::new(garment.triangles, initial.len(), device),
         edges: MeshEdges::new(garment.triangles, device),
     });
     let range = settings.latent_range.as_ref().map(|(lo, hi)| {
@@ -202,14 +205,14 @@ pub fn roll_out(
         (t(lo), t(hi))
     });
     let mut out = Rollout {
-        frames: vec![first],
+        frames: vec![initial],
         timings: vec![FrameTiming::default()],
         collision_before: vec![0.0],
         collision_after: vec![0.0],
     };
     let mut history: Vec<Tensor> = start.iter().map(|g| to_tensor(g, device)).collect();
     progress(0);
-    for (t, pose) in poses.iter().enumerate().skip(1) {
+    for (t, pose) in poses.iter().enumerate().skip(first + 1) {
         let mut timing = FrameTiming::default();
         let clock = Instant::now();
         let back = |k: usize| history[history.len().saturating_sub(k)].shallow_clone();
@@ -281,16 +284,17 @@ pub fn roll_out(
         out.timings.push(timing);
         out.collision_before.push(before);
         out.collision_after.push(after);
-        progress(t);
+        progress(t - first);
     }
     Ok(out)
 }
 
-/// [`roll_out`] of a model file's dynamic model over `poses` at the model's rate, with its anchors
-/// and, unless `settings` says otherwise, its latents held in the training range.
+/// [`roll_out`] of a model file's dynamic model over `poses[first..]` at the model's rate, with
+/// its anchors and, unless `settings` says otherwise, its latents held in the training range.
 pub fn for_model(
     file: &ModelFile,
     poses: &[Vec<JointTransform>],
+    first: usize,
     init: &Init,
     mut settings: Settings,
     progress: &mut dyn FnMut(usize),
@@ -315,11 +319,19 @@ pub fn for_model(
         &anchors,
         &garment,
         poses,
+        first,
         info.fps as f64,
         init,
         &settings,
         progress,
     )
+}
+
+/// Poses a roll-out restarted at frame `start` of a clip plays before it as the body's known
+/// past ([`roll_out`]'s `first`): the frames whose drives the model's learnt dynamics read
+/// (none without them), as many as the clip has before `start`.
+pub fn restart_lead(file: &ModelFile, start: usize) -> Result<usize> {
+    Ok(start.min(file.dynamic()?.motion()?.past_frames()))
 }
 
 fn ms(since: Instant) -> f64 {

@@ -513,8 +513,9 @@ pub fn vertex_distance(a: &Tensor, b: &Tensor) -> Tensor {
 }
 
 /// One-step predictions (teacher-forced histories) of every frame that has a previous frame in
-/// its clip, against the simulation; `progress(done, total)` after each chunk of frames
-/// (minutes on a 20-take set: every frame blends its seeds four times).
+/// its clip, against the simulation; `progress(done, total)` after each chunk of frames. A
+/// linear model ([`Dynamic::linear_only`], every model with learnt dynamics) blends each
+/// frame's seeds once (`unroll::one_step_linear`); one with networks blends them per encode.
 pub fn one_step(
     dynamic: &Dynamic,
     data: &FrameData,
@@ -522,9 +523,14 @@ pub fn one_step(
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Reconstruction> {
     let encoder = dynamic.motion()?;
+    let frames = predicted_frames(data);
+    if dynamic.linear_only() {
+        return Ok(super::unroll::one_step_linear(
+            dynamic, data, fps, &frames, progress,
+        ));
+    }
     let space = &dynamic.space;
     let history = history_indices(data, space.consts.rest.device());
-    let frames = predicted_frames(data);
     let idx_all = Tensor::from_slice(&frames).to_device(space.consts.rest.device());
     let pred = crate::models::predict_chunks(frames.len(), |s, n| {
         let idx = idx_all.narrow(0, s as i64, n as i64);

@@ -14,13 +14,13 @@
 //! rounds of `train::motion` refit `W` the same way, in closed form).
 
 use super::adam::Adam;
-use super::dynamic::FrameData;
+use super::dynamic::{FrameData, Reconstruction};
 use super::motion::history_indices;
 use crate::geometry::strain_limit::StrainLimit;
 use crate::models::dynamic::learned::{
     DynamicsEpoch, DynamicsFit, DynamicsSettings, LearnedDynamics,
 };
-use crate::models::dynamic::motion::{drives, past_drives, History, MotionEncoder, StaticInputs};
+use crate::models::dynamic::motion::{drives, past_drives, MotionEncoder};
 use crate::models::dynamic::space::inverse3;
 use crate::models::dynamic::Dynamic;
 use crate::models::dynamic::Space;
@@ -75,12 +75,20 @@ pub fn fit_dynamics(
     let history = history_indices(data, data.garment.device());
     let drives = drives(&data.body, &history[0], &encoder.shape, fps);
     let clip_first = clip_firsts(data);
+    let posed = PosedFrames::new(&dynamic.space, data);
+    let teacher = TeacherFrames {
+        dynamic,
+        data,
+        posed: &posed,
+        history,
+        drives: &drives,
+        clip_first: &clip_first,
+    };
     encoder
         .dynamics
         .as_ref()
         .expect("added above")
-        .normalise_to(&teacher_inputs(dynamic, data, fps, &drives, &clip_first));
-    let posed = PosedFrames::new(&dynamic.space, data);
+        .normalise_to(&teacher_inputs(&teacher));
     let played = Played {
         dynamic,
         data,
@@ -236,38 +244,89 @@ fn past_at(encoder: &MotionEncoder, drives: &Tensor, now: &[i64], clip_first: &[
     past_drives(drives, now, &firsts, encoder.past_frames())
 }
 
-/// `D`'s inputs on every frame's simulated history (its normalisation); `drives` every frame's
-/// body drive.
-fn teacher_inputs(
+/// The linear path's inputs at frames `idx` from their simulated histories (teacher forcing):
+/// `(Z_{t−1}, [Z^ball_t, Z^stay_t], u_t, past drives)`, each frame's seeds blended once
+/// (`posed`) rather than once per encode.
+struct TeacherFrames<'a> {
+    dynamic: &'a Dynamic,
+    data: &'a FrameData,
+    posed: &'a PosedFrames,
+    history: [Tensor; 3],
+    /// Every frame's body drive against its previous frame (`motion::drives`).
+    drives: &'a Tensor,
+    clip_first: &'a [i64],
+}
+
+impl TeacherFrames<'_> {
+    fn inputs(&self, idx: &Tensor) -> (Tensor, Tensor, Tensor, Tensor) {
+        tch::no_grad(|| {
+            let space = &self.dynamic.space;
+            let encoder = self.dynamic.motion.as_ref().expect("a motion stage");
+            let back = |k: usize| self.history[k].index_select(0, idx);
+            let (b1, b2) = (back(0), back(1));
+            let g1 = self.data.garment.index_select(0, &b1);
+            let g2 = self.data.garment.index_select(0, &b2);
+            let (_, inv_before, shift_before) = self.posed.at(&b1);
+            let (_, inv_now, shift_now) = self.posed.at(idx);
+            let previous = space.linear_latent_unskinned(&g1, &inv_before, &shift_before);
+            let ballistic = &g1 * 2.0 - &g2;
+            let inertia = Tensor::cat(
+                &[
+                    space.linear_latent_unskinned(&ballistic, &inv_now, &shift_now),
+                    space.linear_latent_unskinned(&g1, &inv_now, &shift_now),
+                ],
+                1,
+            );
+            let now = Vec::<i64>::try_from(idx).unwrap_or_default();
+            let past = past_at(encoder, self.drives, &now, self.clip_first);
+            (previous, inertia, self.drives.index_select(0, idx), past)
+        })
+    }
+}
+
+/// `D`'s inputs on every frame's simulated history (its normalisation).
+fn teacher_inputs(frames: &TeacherFrames) -> Tensor {
+    crate::models::predict_chunks(frames.data.len(), |start, n| {
+        let (previous, inertia, drive, past) = frames.inputs(&frames.data.range(start, n));
+        LearnedDynamics::inputs(&inertia, &previous, &drive, &past)
+    })
+}
+
+/// One-step predictions from the simulated histories of `frames` against the simulation, for a
+/// model whose space and motion residual are linear ([`Dynamic::linear_only`]): the integrator
+/// (and `D`, with the past drives a roll-out gives it) on each frame's simulated history,
+/// decoded and skinned. `progress(done, total)` after each chunk.
+pub fn one_step_linear(
     dynamic: &Dynamic,
     data: &FrameData,
     fps: f64,
-    drives: &Tensor,
-    clip_first: &[i64],
-) -> Tensor {
+    frames: &[i64],
+    progress: &mut dyn FnMut(usize, usize),
+) -> Reconstruction {
     let encoder = dynamic.motion.as_ref().expect("a motion stage");
-    let history = history_indices(data, data.garment.device());
-    crate::models::predict_chunks(data.len(), |start, n| {
-        let idx = data.range(start, n);
-        let back = |k: usize| {
-            data.garment
-                .index_select(0, &history[k].narrow(0, start as i64, n as i64))
-        };
-        let before = data
-            .body
-            .select(&history[0].narrow(0, start as i64, n as i64));
-        let now = data.body.select(&idx);
-        let h = History {
-            garment: [back(0), back(1), back(2)],
-            before,
-            now,
-            fps,
-        };
-        let (previous, inertia) = StaticInputs::linear(&dynamic.space, &h);
-        let now: Vec<i64> = (start as i64..(start + n) as i64).collect();
-        let past = past_at(encoder, drives, &now, clip_first);
-        LearnedDynamics::inputs(&inertia, &previous, &drives.index_select(0, &idx), &past)
-    })
+    let device = data.garment.device();
+    let history = history_indices(data, device);
+    let drives = drives(&data.body, &history[0], &encoder.shape, fps);
+    let clip_first = clip_firsts(data);
+    let posed = PosedFrames::new(&dynamic.space, data);
+    let teacher = TeacherFrames {
+        dynamic,
+        data,
+        posed: &posed,
+        history,
+        drives: &drives,
+        clip_first: &clip_first,
+    };
+    let idx_all = Tensor::from_slice(frames).to_device(device);
+    let pred = crate::models::predict_chunks(frames.len(), |s, n| {
+        let idx = idx_all.narrow(0, s as i64, n as i64);
+        let (previous, inertia, drive, past) = teacher.inputs(&idx);
+        let z = encoder.integrate(&inertia, &previous, &drive, &past);
+        let (rot, _, shift) = posed.at(&idx);
+        progress(s + n, frames.len());
+        Space::skin_blended(&dynamic.space.canonical(&z), &(rot, shift))
+    });
+    Reconstruction::of(&pred, &data.garment.index_select(0, &idx_all))
 }
 
 /// Every training frame's per-vertex seed transforms, blended once (the body never changes

@@ -280,6 +280,37 @@ fn learnt_dynamics_play_closer_than_their_linear_base() {
     let (l, d) = (error(&linear, "linear.pc2"), error(&learned, "learned.pc2"));
     eprintln!("131_01 rolled out over frames 1-5: {l:.3} mm linear, {d:.3} mm learnt");
     assert!(d < 0.7 * l, "learnt {d:.3} mm, linear {l:.3} mm");
+    // The fit's one-step report plays each frame from its simulated history as `rollout` does
+    // when restarted from the simulation at every frame (fix and strain limit off): the same
+    // mean, past drives included.
+    let restarted = roll_out(
+        &learned,
+        &sim,
+        &dir.join("restarts.pc2"),
+        &[
+            "--no-collision-fix",
+            "--strain-iterations",
+            "0",
+            "--reference",
+            sim.to_str().unwrap(),
+            "--restart-every",
+            "1",
+        ],
+    );
+    let steps: Vec<f64> = restarted["restarts"]["each"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|e| e[1]["one_step_mm"].as_f64())
+        .collect();
+    let rolled = steps.iter().sum::<f64>() / steps.len() as f64;
+    let teacher = report["train"]["mean_mm"].as_f64().unwrap();
+    eprintln!("one step from the simulation: {rolled:.5} mm restarted ({} restarts), {teacher:.5} mm reported", steps.len());
+    assert!(
+        (rolled - teacher).abs() < 0.01 * teacher,
+        "{}",
+        restarted["restarts"]
+    );
 }
 
 /// `rollout` of 131_01 with `model` from `init`, written to `out`.
