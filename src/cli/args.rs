@@ -216,3 +216,44 @@ impl CacheSpaceArgs {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use clap::CommandFactory;
+
+    /// Every id a command's [`super::short_help`] leaves out of `-h` is one of its flags: a
+    /// misspelt id would leave its flag on the short screen without a word.
+    #[test]
+    fn short_help_names_only_flags_of_its_command() {
+        let cli = super::super::Cli::command();
+        let lists: [(&[&str], &[&str]); 5] = [
+            (&["train"], &super::TRAIN_SHORT_HIDES),
+            (&["bench", "train"], &super::TRAIN_SHORT_HIDES),
+            (
+                &["train-dynamic"],
+                &super::super::train_dynamic::SHORT_HIDES,
+            ),
+            (&["rollout"], &super::super::rollout::SHORT_HIDES),
+            (&["compare"], &super::super::compare::SHORT_HIDES),
+        ];
+        for (path, ids) in lists {
+            let mut cmd = &cli;
+            for name in path {
+                cmd = cmd
+                    .find_subcommand(name)
+                    .unwrap_or_else(|| panic!("no command {path:?}"));
+            }
+            let flags: Vec<String> = cmd
+                .get_arguments()
+                .map(|a| a.get_id().to_string())
+                .collect();
+            for id in ids {
+                assert!(
+                    flags.iter().any(|f| f == id),
+                    "garmentbake {} has no flag with the id {id}",
+                    path.join(" ")
+                );
+            }
+        }
+    }
+}

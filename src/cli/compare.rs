@@ -10,7 +10,7 @@ use anyhow::{bail, Result};
 use std::path::PathBuf;
 
 /// The flags (ids) `-h` leaves out besides the Advanced ones (`--help` shows them).
-const SHORT_HIDES: [&str; 2] = ["up", "units"];
+pub(super) const SHORT_HIDES: [&str; 2] = ["up", "units"];
 
 /// Compare garment caches of one clip (a dynamic roll-out, PBNS, plain LBS, another simulation)
 /// against three or more perturbed simulations of it (`simulate --perturb 0/1/2`).

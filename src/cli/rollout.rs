@@ -15,7 +15,7 @@ use std::path::PathBuf;
 pub use crate::pipeline::rollout::report::Report;
 
 /// The flags (ids) `-h` leaves out besides the Advanced ones (`--help` shows them).
-const SHORT_HIDES: [&str; 3] = ["float_targets", "out_units", "out_up"];
+pub(super) const SHORT_HIDES: [&str; 3] = ["float_targets", "out_units", "out_up"];
 
 /// Play a dynamic garment model (`train-dynamic --stage dynamic`) over motion clips.
 ///

@@ -13,7 +13,7 @@ pub use crate::pipeline::train_dynamic::Report;
 
 /// The flags (ids) `-h` leaves out besides the Advanced ones; the collision fix's, which only the
 /// hidden --rollout-fix uses, are hidden from `--help` too (both in `#[command]` below).
-const SHORT_HIDES: [&str; 5] = ["maps", "up", "units", "latent", "dynamics_history"];
+pub(super) const SHORT_HIDES: [&str; 5] = ["maps", "up", "units", "latent", "dynamics_history"];
 
 /// Train the dynamic garment model on cloth simulations (`garmentbake simulate`).
 ///
