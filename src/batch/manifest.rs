@@ -104,6 +104,9 @@ pub struct DynamicRecipe {
     /// Epochs of the motion encoder (stage 2; 0 keeps its ridge fit).
     #[serde(default)]
     pub dynamic_epochs: usize,
+    /// Epochs of the learnt dynamics (`train-dynamic --dynamics-epochs`; default: the
+    /// command's, the recipe's 40). 0 for clips shorter than its 32-frame windows.
+    pub dynamics_epochs: Option<usize>,
     /// Further `train-dynamic` flags for both stages.
     #[serde(default)]
     pub args: Vec<String>,

@@ -560,6 +560,9 @@ fn dynamic_jobs(b: &mut Builder, r: &Resolved, g: &Garment) -> Result<()> {
         &sidecar(g),
     )?;
     let mut args = train_args("dynamic", d.dynamic_epochs)?;
+    if let Some(n) = d.dynamics_epochs {
+        args.extend([t("--dynamics-epochs"), t(n)]);
+    }
     args.extend([
         t("--from"),
         Arg::In(space),

@@ -144,9 +144,10 @@ pub struct Args {
     /// A small network beside the linear integrator, fitted through the model's own roll-outs of
     /// the training clips (windows growing from --unroll-frames' first to its last length, noise
     /// on each window's start; loss: decoded mm and velocity). 0: the linear integrator alone.
-    /// Its last layer starts at zero, so it only adds what the roll-outs teach it.
-    #[arg(long, default_value_t = 0, value_name = "N", help_heading = "Training")]
-    pub dynamics_epochs: usize,
+    /// Its last layer starts at zero, so it only adds what the roll-outs teach it. Default: 40
+    /// (the recipe) with --epochs 0, else 0 (it needs the linear paths).
+    #[arg(long, value_name = "N", help_heading = "Training")]
+    pub dynamics_epochs: Option<usize>,
     /// Stage dynamic, with --dynamics-epochs: hidden layer widths of the learnt dynamics.
     #[arg(long, value_delimiter = ',', value_name = "W,W")]
     #[arg(default_value = "128,128", help_heading = "Advanced")]

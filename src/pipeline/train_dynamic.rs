@@ -64,7 +64,8 @@ pub struct Request {
     pub rollout_window: usize,
     pub body_drive: bool,
     pub drive_ridge: f64,
-    pub dynamics_epochs: usize,
+    /// None: the recipe's (`DynamicsSettings::default`) when the networks are off, else 0.
+    pub dynamics_epochs: Option<usize>,
     pub dynamics_widths: Vec<usize>,
     pub unroll_frames: Vec<usize>,
     pub dynamics_noise: f64,
@@ -369,8 +370,9 @@ impl Request {
         };
         let done = trainer.epochs_done();
         let fitted = fit(&mut trainer, &self.fit_options(feedback.hide_bars))?;
-        if self.dynamics_epochs > 0 {
-            let settings = self.dynamics_settings()?;
+        let dynamics_epochs = self.dynamics_epochs(trainer.dynamic().space.networks_idle());
+        if dynamics_epochs > 0 {
+            let settings = self.dynamics_settings(dynamics_epochs)?;
             say(&format!(
                 "learnt dynamics: {} epochs through roll-outs of {}..{} frames",
                 settings.epochs, settings.horizon.0, settings.horizon.1
@@ -484,7 +486,10 @@ impl Request {
     }
 
     /// The learnt dynamics' fit from the flags.
-    fn dynamics_settings(&self) -> Result<crate::models::dynamic::learned::DynamicsSettings> {
+    fn dynamics_settings(
+        &self,
+        epochs: usize,
+    ) -> Result<crate::models::dynamic::learned::DynamicsSettings> {
         let [first, last] = self.unroll_frames[..] else {
             bail!("--unroll-frames takes two lengths, FIRST,LAST (e.g. 8,32)");
         };
@@ -496,7 +501,7 @@ impl Request {
         }
         Ok(crate::models::dynamic::learned::DynamicsSettings {
             widths: self.dynamics_widths.clone(),
-            epochs: self.dynamics_epochs,
+            epochs,
             horizon: (first, last),
             noise: self.dynamics_noise,
             drive_history: self.dynamics_history,
@@ -506,6 +511,15 @@ impl Request {
             strain_iterations: RolloutSettings::default().strain_iterations,
             ..Default::default()
         })
+    }
+
+    /// `--dynamics-epochs`, by default the recipe's when the space and the motion stage are
+    /// linear (the learnt dynamics sit beside the linear paths only), else none.
+    fn dynamics_epochs(&self, linear_space: bool) -> usize {
+        let recipe = crate::models::dynamic::learned::DynamicsSettings::default().epochs;
+        let linear = linear_space && self.epochs == 0;
+        self.dynamics_epochs
+            .unwrap_or(if linear { recipe } else { 0 })
     }
 
     /// `--rollout-rounds`, by default 0 when settling and 3 without.

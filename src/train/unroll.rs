@@ -56,7 +56,7 @@ pub fn fit_dynamics(
     let starts = window_starts(data, s.horizon.1.max(s.horizon.0));
     if starts.is_empty() {
         bail!(
-            "no training clip is long enough for a {}-frame window (and 3 frames of history)",
+            "no training clip is long enough for a {}-frame window (and 3 frames of history) of the learnt dynamics: give shorter --unroll-frames, or --dynamics-epochs 0 for the linear integrator alone",
             s.horizon.1
         );
     }

@@ -485,6 +485,8 @@ fn dynamic_jobs_report_their_figures() {
                 "30",
                 "--epochs",
                 "0",
+                "--dynamics-epochs",
+                "0",
                 "--threads",
                 "1",
                 "--out",

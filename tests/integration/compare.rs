@@ -254,6 +254,8 @@ fn a_dynamic_model_is_restarted_from_each_runs_state() {
         "--no-pose-settle",
         "--rollout-rounds",
         "0",
+        "--dynamics-epochs",
+        "0",
         "--out",
         model.to_str().unwrap(),
     ];

@@ -22,10 +22,13 @@ use std::time::Instant;
 ///   clips at 1 fps (`--fps 1`, given or replaced);
 /// - `simulate` → `--frames 6` with a 0.3 s lead-in (`--settle 0.1 --blend 0.2`) in the tests'
 ///   shared simulation cache (`common::sim_cache`), `rollout --frames N` → `--frames 6`;
+/// - `train-dynamic --stage dynamic` → the learnt dynamics (the default, or
+///   `--dynamics-epochs N > 0`) for one epoch through 2–3-frame windows (`--unroll-frames 2,3`:
+///   six frames are shorter than the recipe's 32);
 /// - the batch manifest (`samples/batch.toml`, copied into the scratch folder) keeps the skirt's
 ///   PBNS recipe alone, 1 epoch, its bakes (no point cache) for 131_02 only, the clips at 1 fps.
 pub const SHORT_SETTINGS: &str = "epochs 1; PBNS clips at 1 fps; 6 simulated / rolled-out frames \
-     with a 0.3 s lead-in; the batch manifest cut to the skirt's PBNS bakes of 131_02";
+     with a 0.3 s lead-in; the learnt dynamics 1 epoch of 2-3-frame windows; the batch manifest cut to the skirt's PBNS bakes of 131_02";
 
 const PBNS_CLIP_COMMANDS: [&str; 5] = ["train", "train-swing", "eval", "bake", "validate"];
 
@@ -191,6 +194,20 @@ fn shorten(args: &mut Vec<String>) {
             ("--cache", sim_cache()),
         ] {
             set_flag(args, flag, value);
+        }
+    }
+    let stage = args
+        .iter()
+        .position(|a| a == "--stage")
+        .map(|i| args[i + 1].as_str());
+    if command == "train-dynamic" && stage == Some("dynamic") {
+        let off = args
+            .iter()
+            .position(|a| a == "--dynamics-epochs")
+            .is_some_and(|i| args[i + 1] == "0");
+        if !off {
+            set_flag(args, "--dynamics-epochs", "1");
+            set_flag(args, "--unroll-frames", "2,3");
         }
     }
     if command == "rollout" && has(args, "--frames") {
@@ -430,6 +447,20 @@ fn commands_are_extracted_and_shortened() {
             "simulate --frames 6 --fps 30 --json --settle 0.1 --blend 0.2 --cache {}",
             sim_cache()
         )
+    );
+    // The motion stage: the learnt dynamics (on by default) cut to fit six frames; off stays off.
+    let words = |s: &str| s.split(' ').map(String::from).collect::<Vec<_>>();
+    let mut stage = words("train-dynamic --stage dynamic --epochs 0 --out m.safetensors");
+    shorten(&mut stage);
+    assert_eq!(
+        stage.join(" "),
+        "train-dynamic --stage dynamic --epochs 0 --out m.safetensors --dynamics-epochs 1 --unroll-frames 2,3"
+    );
+    let mut off = words("train-dynamic --stage dynamic --dynamics-epochs 0");
+    shorten(&mut off);
+    assert_eq!(
+        off.join(" "),
+        "train-dynamic --stage dynamic --dynamics-epochs 0"
     );
 }
 
