@@ -71,19 +71,8 @@ pub fn fit_dynamics(
         bail!("the model has no motion stage to give dynamics to");
     };
     encoder.add_dynamics(&s.widths, s.drive_history);
+    let teacher = TeacherFrames::new(dynamic, data, fps);
     let encoder = dynamic.motion.as_ref().expect("set above");
-    let history = history_indices(data, data.garment.device());
-    let drives = drives(&data.body, &history[0], &encoder.shape, fps);
-    let clip_first = clip_firsts(data);
-    let posed = PosedFrames::new(&dynamic.space, data);
-    let teacher = TeacherFrames {
-        dynamic,
-        data,
-        posed: &posed,
-        history,
-        drives: &drives,
-        clip_first: &clip_first,
-    };
     encoder
         .dynamics
         .as_ref()
@@ -92,8 +81,8 @@ pub fn fit_dynamics(
     let played = Played {
         dynamic,
         data,
-        posed: &posed,
-        drives: &drives,
+        posed: &teacher.posed,
+        drives: &teacher.drives,
         range,
         limit: (s.strain_iterations > 0).then_some((limit, s.strain_band, s.strain_iterations)),
     };
@@ -244,20 +233,34 @@ fn past_at(encoder: &MotionEncoder, drives: &Tensor, now: &[i64], clip_first: &[
     past_drives(drives, now, &firsts, encoder.past_frames())
 }
 
-/// The linear path's inputs at frames `idx` from their simulated histories (teacher forcing):
-/// `(Z_{t−1}, [Z^ball_t, Z^stay_t], u_t, past drives)`, each frame's seeds blended once
-/// (`posed`) rather than once per encode.
+/// The training frames as the linear path sees them from their simulated histories (teacher
+/// forcing): each frame's seeds blended once (`posed`) rather than once per encode, its history,
+/// body drive and clip.
 struct TeacherFrames<'a> {
     dynamic: &'a Dynamic,
     data: &'a FrameData,
-    posed: &'a PosedFrames,
+    posed: PosedFrames,
     history: [Tensor; 3],
     /// Every frame's body drive against its previous frame (`motion::drives`).
-    drives: &'a Tensor,
-    clip_first: &'a [i64],
+    drives: Tensor,
+    clip_first: Vec<i64>,
 }
 
-impl TeacherFrames<'_> {
+impl<'a> TeacherFrames<'a> {
+    fn new(dynamic: &'a Dynamic, data: &'a FrameData, fps: f64) -> TeacherFrames<'a> {
+        let encoder = dynamic.motion.as_ref().expect("a motion stage");
+        let history = history_indices(data, data.garment.device());
+        TeacherFrames {
+            dynamic,
+            data,
+            posed: PosedFrames::new(&dynamic.space, data),
+            drives: drives(&data.body, &history[0], &encoder.shape, fps),
+            history,
+            clip_first: clip_firsts(data),
+        }
+    }
+
+    /// `(Z_{t−1}, [Z^ball_t, Z^stay_t], u_t, past drives)` at frames `idx`.
     fn inputs(&self, idx: &Tensor) -> (Tensor, Tensor, Tensor, Tensor) {
         tch::no_grad(|| {
             let space = &self.dynamic.space;
@@ -278,7 +281,7 @@ impl TeacherFrames<'_> {
                 1,
             );
             let now = Vec::<i64>::try_from(idx).unwrap_or_default();
-            let past = past_at(encoder, self.drives, &now, self.clip_first);
+            let past = past_at(encoder, &self.drives, &now, &self.clip_first);
             (previous, inertia, self.drives.index_select(0, idx), past)
         })
     }
@@ -305,24 +308,13 @@ pub fn one_step_linear(
 ) -> Reconstruction {
     let encoder = dynamic.motion.as_ref().expect("a motion stage");
     let device = data.garment.device();
-    let history = history_indices(data, device);
-    let drives = drives(&data.body, &history[0], &encoder.shape, fps);
-    let clip_first = clip_firsts(data);
-    let posed = PosedFrames::new(&dynamic.space, data);
-    let teacher = TeacherFrames {
-        dynamic,
-        data,
-        posed: &posed,
-        history,
-        drives: &drives,
-        clip_first: &clip_first,
-    };
+    let teacher = TeacherFrames::new(dynamic, data, fps);
     let idx_all = Tensor::from_slice(frames).to_device(device);
     let pred = crate::models::predict_chunks(frames.len(), |s, n| {
         let idx = idx_all.narrow(0, s as i64, n as i64);
         let (previous, inertia, drive, past) = teacher.inputs(&idx);
         let z = encoder.integrate(&inertia, &previous, &drive, &past);
-        let (rot, _, shift) = posed.at(&idx);
+        let (rot, _, shift) = teacher.posed.at(&idx);
         progress(s + n, frames.len());
         Space::skin_blended(&dynamic.space.canonical(&z), &(rot, shift))
     });
