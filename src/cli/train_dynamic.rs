@@ -20,17 +20,14 @@ pub(super) const SHORT_HIDES: [&str; 5] = ["maps", "up", "units", "latent", "dyn
 /// Two stages, one model file:
 ///
 /// `--stage space` (first): the generative space of garment deformations. Each simulated frame
-/// is measured relative to body seed points, laid out in the garment's UV map, encoded to a
-/// 64-number latent and decoded to per-vertex displacements in each vertex's rest frame, then
-/// skinned by the seeds with distance weights whose kernel radius is learnt per body part. Loss:
-/// reconstruction (positions and Laplacians, L1), edge lengths of garments decoded from random
-/// latents, the exact signed distance to the rest body (hinge) and a latent regulariser. The
-/// garment needs UVs. Needs --body and --garment.
+/// is measured against body seed points in the garment's UV layout and reduced to a latent: its
+/// linear path (principal components) by default, the paper's networks beside it with
+/// `--epochs N`. The garment needs UVs. Needs --body and --garment.
 ///
-/// `--stage dynamic --from SPACE.safetensors` (second): the motion encoder, the space frozen.
-/// From the previous garment (its shape, velocity and acceleration) and the body's motion into
-/// the next frame it predicts the next frame's latent; trained on the simulated frames with the
-/// paper's virtual sample (no change in, no change out). Then `garmentbake rollout` plays it.
+/// `--stage dynamic --from SPACE.safetensors` (second): the motion stage, the space frozen. From
+/// the previous garment and the body's motion to the next frame's latent: a ridge-fitted
+/// integrator settled towards the pose, then the learnt dynamics fitted through its own
+/// roll-outs (--dynamics-epochs). Then `garmentbake rollout` plays it.
 ///
 /// Give each --motion its --sim cache (same order, same --fps as simulated). Judge the model with
 /// --eval-motion/--eval-sim on a clip it never saw. A checkpoint is written next to --out every
