@@ -335,11 +335,10 @@ fn restarted_horizon(
     let curve = ensemble.horizon(starts, horizon, |i, t0| {
         let run = &ensemble.runs()[i];
         let init = Init::Moving(run[t0.saturating_sub(2)..=t0].to_vec());
-        let lead = crate::rollout::restart_lead(model, t0)?;
         let played = for_model(
             model,
-            &poses[t0 - lead..=t0 + horizon],
-            lead,
+            poses,
+            t0..t0 + horizon + 1,
             &init,
             settings.rollout.clone(),
             &mut |f| bar.set_position(done + f as u64),

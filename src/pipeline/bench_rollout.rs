@@ -81,9 +81,14 @@ pub fn run(request: &Request, feedback: &Feedback) -> Result<RolloutTimes> {
     let (say, hide_bar) = (feedback.say, feedback.hide_bars);
     let roll = |settings: &Settings| -> Result<Timing> {
         let bar = crate::progress::bar(poses.len() as u64, "roll-out", hide_bar);
-        let r = for_model(&file, &poses, 0, &Init::Rest, settings.clone(), &mut |f| {
-            bar.set_position(f as u64 + 1)
-        })?;
+        let r = for_model(
+            &file,
+            &poses,
+            0..poses.len(),
+            &Init::Rest,
+            settings.clone(),
+            &mut |f| bar.set_position(f as u64 + 1),
+        )?;
         bar.finish_and_clear();
         Ok(Timing::of(&r.timings))
     };

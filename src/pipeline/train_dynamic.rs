@@ -590,11 +590,10 @@ fn roll_clips(
             let from = start.saturating_sub(2);
             let base = garments.len() as i64 - from as i64;
             let init = Init::Moving(s.garment[from..=start].to_vec());
-            let lead = crate::rollout::restart_lead(file, start)?;
             let rolled = for_model(
                 file,
-                &poses[start - lead..=end],
-                lead,
+                &poses,
+                start..end + 1,
                 &init,
                 settings.clone(),
                 &mut |f| done(played + f),

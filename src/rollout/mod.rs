@@ -211,6 +211,10 @@ pub fn roll_out(
         collision_after: vec![0.0],
     };
     let mut history: Vec<Tensor> = start.iter().map(|g| to_tensor(g, device)).collect();
+    // The linear path blends each frame's seed transforms once: to skin it, and a frame later
+    // to unskin its garment.
+    let posed = |f: usize| linear_only.then(|| space.posed(&at(f).transforms));
+    let mut posed_before = posed(first);
     progress(0);
     for (t, pose) in poses.iter().enumerate().skip(first + 1) {
         let mut timing = FrameTiming::default();
@@ -222,14 +226,24 @@ pub fn roll_out(
             now: at(t),
             fps,
         };
-        let x = model.step_inputs(&h, linear_only, model.past_drives(&drives, t)?)?;
+        let posed_now = posed(t);
+        let x = match (&posed_before, &posed_now) {
+            (Some(before), Some(now)) => {
+                model.linear_step_inputs(&h, (before, now), model.past_drives(&drives, t)?)?
+            }
+            _ => model.step_inputs(&h)?,
+        };
         timing.inputs_ms = ms(clock);
         let clock = Instant::now();
         let z = model.next_latent(&x, range.as_ref())?;
         timing.encoder_ms = ms(clock);
         let clock = Instant::now();
         let canonical = tch::no_grad(|| space.canonical(&z));
-        let skinned = tch::no_grad(|| space.skin(&canonical, &h.now.transforms));
+        let skinned = tch::no_grad(|| match &posed_now {
+            Some(now) => now.skin(&canonical),
+            None => space.skin(&canonical, &h.now.transforms),
+        });
+        posed_before = posed_now;
         let mut points = to_points(&skinned);
         timing.decode_ms = ms(clock);
         let clock = Instant::now();
@@ -289,18 +303,31 @@ pub fn roll_out(
     Ok(out)
 }
 
-/// [`roll_out`] of a model file's dynamic model over `poses[first..]` at the model's rate, with
-/// its anchors and, unless `settings` says otherwise, its latents held in the training range.
+/// [`roll_out`] of a model file's dynamic model over the clip frames `played` of `poses` (the
+/// whole clip's poses) at the model's rate, with its anchors and, unless `settings` says
+/// otherwise, its latents held in the training range. A roll-out restarted inside the clip
+/// (`played.start > 0`) keeps the frames before it that the learnt dynamics read as the body's
+/// known past ([`Dynamic::past_drives`]): a restart sees the motion the clip had, not a body
+/// held still.
 pub fn for_model(
     file: &ModelFile,
     poses: &[Vec<JointTransform>],
-    first: usize,
+    played: std::ops::Range<usize>,
     init: &Init,
     mut settings: Settings,
     progress: &mut dyn FnMut(usize),
 ) -> Result<Rollout> {
     let model = file.dynamic()?;
     let info = file.info.dynamic()?;
+    if played.end > poses.len() {
+        bail!(
+            "frames {}..{} are past the clip's {} frames",
+            played.start,
+            played.end,
+            poses.len()
+        );
+    }
+    let lead = played.start.min(model.motion()?.past_frames());
     if settings.latent_range.is_none() {
         settings.latent_range = info
             .motion
@@ -318,20 +345,13 @@ pub fn for_model(
         &file.body,
         &anchors,
         &garment,
-        poses,
-        first,
+        &poses[played.start - lead..played.end],
+        lead,
         info.fps as f64,
         init,
         &settings,
         progress,
     )
-}
-
-/// Poses a roll-out restarted at frame `start` of a clip plays before it as the body's known
-/// past ([`roll_out`]'s `first`): the frames whose drives the model's learnt dynamics read
-/// (none without them), as many as the clip has before `start`.
-pub fn restart_lead(file: &ModelFile, start: usize) -> Result<usize> {
-    Ok(start.min(file.dynamic()?.motion()?.past_frames()))
 }
 
 fn ms(since: Instant) -> f64 {

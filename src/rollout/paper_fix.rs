@@ -51,15 +51,11 @@ pub fn resolve(
     let target_lengths =
         (s.edge_weight > 0.0).then(|| tch::no_grad(|| shape.edges.lengths(garment)));
     // The pose is fixed over the iterations: blend the anchors' transforms once.
-    let blended = tch::no_grad(|| space.blended(decoded.transforms));
+    let posed = space.posed(decoded.transforms);
     // Skinning is affine in the canonical garment, so `Θ`'s displacement adds to any garment.
     let resolved = |theta: &Tensor| {
         let offsets = space.at_vertices(theta);
-        Space::skin_blended(
-            &space.offset_canonical(decoded.canonical, &offsets),
-            &blended,
-        ) - decoded.skinned
-            + garment
+        posed.skin(&space.offset_canonical(decoded.canonical, &offsets)) - decoded.skinned + garment
     };
     for _ in 0..s.iterations {
         let g = resolved(&theta);

@@ -21,7 +21,7 @@ use crate::models::dynamic::learned::{
     DynamicsEpoch, DynamicsFit, DynamicsSettings, LearnedDynamics,
 };
 use crate::models::dynamic::motion::{drives, past_drives, MotionEncoder};
-use crate::models::dynamic::space::inverse3;
+use crate::models::dynamic::space::Posed;
 use crate::models::dynamic::Dynamic;
 use crate::models::dynamic::Space;
 use crate::models::file::{KindInfo, ModelFile};
@@ -263,22 +263,14 @@ impl<'a> TeacherFrames<'a> {
     /// `(Z_{t−1}, [Z^ball_t, Z^stay_t], u_t, past drives)` at frames `idx`.
     fn inputs(&self, idx: &Tensor) -> (Tensor, Tensor, Tensor, Tensor) {
         tch::no_grad(|| {
-            let space = &self.dynamic.space;
             let encoder = self.dynamic.motion.as_ref().expect("a motion stage");
             let back = |k: usize| self.history[k].index_select(0, idx);
             let (b1, b2) = (back(0), back(1));
-            let g1 = self.data.garment.index_select(0, &b1);
-            let g2 = self.data.garment.index_select(0, &b2);
-            let (_, inv_before, shift_before) = self.posed.at(&b1);
-            let (_, inv_now, shift_now) = self.posed.at(idx);
-            let previous = space.linear_latent_unskinned(&g1, &inv_before, &shift_before);
-            let ballistic = &g1 * 2.0 - &g2;
-            let inertia = Tensor::cat(
-                &[
-                    space.linear_latent_unskinned(&ballistic, &inv_now, &shift_now),
-                    space.linear_latent_unskinned(&g1, &inv_now, &shift_now),
-                ],
-                1,
+            let (previous, inertia) = self.dynamic.space.linear_step_latents(
+                &self.data.garment.index_select(0, &b1),
+                &self.data.garment.index_select(0, &b2),
+                &self.posed.at(&b1),
+                &self.posed.at(idx),
             );
             let now = Vec::<i64>::try_from(idx).unwrap_or_default();
             let past = past_at(encoder, &self.drives, &now, &self.clip_first);
@@ -314,47 +306,30 @@ pub fn one_step_linear(
         let idx = idx_all.narrow(0, s as i64, n as i64);
         let (previous, inertia, drive, past) = teacher.inputs(&idx);
         let z = encoder.integrate(&inertia, &previous, &drive, &past);
-        let (rot, _, shift) = teacher.posed.at(&idx);
         progress(s + n, frames.len());
-        Space::skin_blended(&dynamic.space.canonical(&z), &(rot, shift))
+        teacher.posed.at(&idx).skin(&dynamic.space.canonical(&z))
     });
     Reconstruction::of(&pred, &data.garment.index_select(0, &idx_all))
 }
 
 /// Every training frame's per-vertex seed transforms, blended once (the body never changes
-/// between epochs): rotations, their inverses and translations.
-pub struct PosedFrames {
-    rotation: Tensor,
-    inverse: Tensor,
-    shift: Tensor,
-}
+/// between epochs).
+pub struct PosedFrames(Posed);
 
 impl PosedFrames {
     pub fn new(space: &Space, data: &FrameData) -> PosedFrames {
-        let (mut rotation, mut inverse, mut shift) = (Vec::new(), Vec::new(), Vec::new());
-        tch::no_grad(|| {
-            for start in (0..data.len()).step_by(crate::models::PREDICT_CHUNK) {
+        let parts: Vec<Posed> = (0..data.len())
+            .step_by(crate::models::PREDICT_CHUNK)
+            .map(|start| {
                 let n = crate::models::PREDICT_CHUNK.min(data.len() - start);
-                let m = data.body.transforms.narrow(0, start as i64, n as i64);
-                let (r, t) = space.blended(&m);
-                inverse.push(inverse3(&r));
-                rotation.push(r);
-                shift.push(t);
-            }
-        });
-        PosedFrames {
-            rotation: Tensor::cat(&rotation, 0),
-            inverse: Tensor::cat(&inverse, 0),
-            shift: Tensor::cat(&shift, 0),
-        }
+                space.posed(&data.body.transforms.narrow(0, start as i64, n as i64))
+            })
+            .collect();
+        PosedFrames(Posed::cat(&parts))
     }
 
-    fn at(&self, idx: &Tensor) -> (Tensor, Tensor, Tensor) {
-        (
-            self.rotation.index_select(0, idx),
-            self.inverse.index_select(0, idx),
-            self.shift.index_select(0, idx),
-        )
+    fn at(&self, idx: &Tensor) -> Posed {
+        self.0.select(idx)
     }
 }
 
@@ -386,13 +361,12 @@ fn unroll_loss(
     let start = |offset: i64, eps: Option<&Tensor>| {
         tch::no_grad(|| {
             let idx = frames(offset);
-            let (rot, inv, shift) = posed.at(&idx);
-            let mut z =
-                space.linear_latent_unskinned(&data.garment.index_select(0, &idx), &inv, &shift);
+            let at = posed.at(&idx);
+            let mut z = space.linear_latent_posed(&data.garment.index_select(0, &idx), &at);
             if let Some(e) = eps {
                 z += e;
             }
-            Space::skin_blended(&space.canonical(&z), &(rot, shift))
+            at.skin(&space.canonical(&z))
         })
     };
     let mut g1 = start(-1, noise.map(|n| n.0));
@@ -404,27 +378,14 @@ fn unroll_loss(
     for step in 0..k as i64 {
         let now_idx = frames(step);
         let now = posed.at(&now_idx);
-        let (_, inv_before, shift_before) = &before;
-        let (_, inv_now, shift_now) = &now;
-        let ballistic = &g1 * 2.0 - &g2;
-        let previous = space.linear_latent_unskinned(&g1, inv_before, shift_before);
-        let inertia = Tensor::cat(
-            &[
-                space.linear_latent_unskinned(&ballistic, inv_now, shift_now),
-                space.linear_latent_unskinned(&g1, inv_now, shift_now),
-            ],
-            1,
-        );
+        let (previous, inertia) = space.linear_step_latents(&g1, &g2, &before, &now);
         // The drive of frame t against t − 1 (the clip's first frame against itself).
         let drive = drives.index_select(0, &now_idx);
         let past = past_drives(drives, &at(step), &firsts, encoder.past_frames());
         let z = encoder
             .integrate(&inertia, &previous, &drive, &past)
             .clamp_tensor(Some(*lo), Some(*hi));
-        let g = Space::skin_blended(
-            &space.canonical(&z),
-            &(now.0.shallow_clone(), now.2.shallow_clone()),
-        );
+        let g = now.skin(&space.canonical(&z));
         let g = match limit {
             Some(l) => strain_limited(&g, l),
             None => g,

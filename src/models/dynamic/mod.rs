@@ -35,33 +35,42 @@ impl Dynamic {
     }
 
     /// Whether every network's output layer is zero (both stages trained `--epochs 0`): a
-    /// roll-out step is then exactly the linear paths', and [`Dynamic::step_inputs`] skips
-    /// the networks' inputs.
+    /// roll-out step is then exactly the linear paths' ([`Dynamic::linear_step_inputs`]), with
+    /// no networks' inputs to build.
     pub fn linear_only(&self) -> bool {
         self.space.networks_idle() && self.motion.as_ref().is_some_and(|m| m.residual_idle())
     }
 
-    /// A roll-out step's inputs from its history: all of them, or with `linear_only` (see
-    /// [`Dynamic::linear_only`]) only the linear path's latents, and `past`, the drives before
-    /// this frame that the learnt dynamics see ([`Dynamic::past_drives`]).
-    pub fn step_inputs(
+    /// A roll-out step's inputs from its history, networks' inputs included.
+    pub fn step_inputs(&self, h: &motion::History) -> anyhow::Result<StepInputs> {
+        let encoder = self.motion()?;
+        Ok(StepInputs::Full(motion::motion_inputs(
+            &self.space,
+            h,
+            &encoder.shape,
+            None,
+        )))
+    }
+
+    /// A roll-out step's inputs when the model is [`Dynamic::linear_only`]: the linear path's
+    /// latents of the history's last two garments under the poses at `t − 1` and `t` (blended
+    /// once per frame by the caller, [`Space::posed`]), the body drive, and `past`, the drives
+    /// before this frame that the learnt dynamics see ([`Dynamic::past_drives`]).
+    pub fn linear_step_inputs(
         &self,
         h: &motion::History,
-        linear_only: bool,
+        (before, now): (&space::Posed, &space::Posed),
         past: tch::Tensor,
     ) -> anyhow::Result<StepInputs> {
         let encoder = self.motion()?;
-        Ok(if linear_only {
-            let (previous, inertia) = motion::StaticInputs::linear(&self.space, h);
-            let drive = motion::body_drive(&h.before, &h.now, &encoder.shape, h.fps);
-            StepInputs::Linear {
-                previous,
-                inertia,
-                drive,
-                past,
-            }
-        } else {
-            StepInputs::Full(motion::motion_inputs(&self.space, h, &encoder.shape, None))
+        let [g1, g2, _] = &h.garment;
+        let (previous, inertia) =
+            tch::no_grad(|| self.space.linear_step_latents(g1, g2, before, now));
+        Ok(StepInputs::Linear {
+            previous,
+            inertia,
+            drive: motion::body_drive(&h.before, &h.now, &encoder.shape, h.fps),
+            past,
         })
     }
 

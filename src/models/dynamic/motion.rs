@@ -205,15 +205,6 @@ impl StaticInputs {
         })
     }
 
-    /// `(Z_{t−1}, [Z^ball_t, Z^stay_t])` by the space's linear path alone: all of them when the
-    /// space's networks are idle ([`Space::networks_idle`]).
-    pub fn linear(space: &Space, h: &History) -> (Tensor, Tensor) {
-        tch::no_grad(|| {
-            let (g, _, m) = Self::stacked(h);
-            Self::split(&space.linear_latent(&g, &m), h.garment[0].size()[0])
-        })
-    }
-
     /// The three garments to encode (`g_{t−1}` against the body at `t − 1`; the ballistic
     /// guess and `g_{t−1}` against the body at `t`) as one batch: garments, anchors, transforms.
     fn stacked(h: &History) -> (Tensor, Tensor, Tensor) {

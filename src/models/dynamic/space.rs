@@ -439,12 +439,37 @@ impl Space {
         self.local_displacements(&self.unskin(g, m))
     }
 
-    /// The linear path's latent of garments `g [B, V, 3]` unskinned by per-vertex transforms
-    /// already blended and inverted ([`Space::blended`], [`inverse3`] of its rotations): for
-    /// callers that encode many garments under the same poses (`train::unroll`).
-    pub fn linear_latent_unskinned(&self, g: &Tensor, inverse: &Tensor, shift: &Tensor) -> Tensor {
-        let local = inverse.matmul(&(g - shift).unsqueeze(3)).squeeze_dim(3);
+    /// The linear path's latent of garments `g [B, V, 3]` under per-vertex transforms already
+    /// blended ([`Space::posed`]): for callers that encode many garments under the same poses.
+    pub fn linear_latent_posed(&self, g: &Tensor, posed: &Posed) -> Tensor {
+        let local = posed
+            .inverse
+            .matmul(&(g - &posed.shift).unsqueeze(3))
+            .squeeze_dim(3);
         (self.local_displacements(&local) - &self.linear_mean).matmul(&self.linear_encode.tr())
+    }
+
+    /// The linear path's step inputs `(Z_{t−1}, [Z^ball_t, Z^stay_t])` from the last two
+    /// garments `g1 = g_{t−1}`, `g2 = g_{t−2}` and the poses at `t − 1` and `t`: `g_{t−1}` against
+    /// the body at `t − 1`; the ballistic guess `2g_{t−1} − g_{t−2}` and `g_{t−1}` against the
+    /// body at `t`. One definition for training (teacher-forced and unrolled) and roll-outs.
+    pub fn linear_step_latents(
+        &self,
+        g1: &Tensor,
+        g2: &Tensor,
+        before: &Posed,
+        now: &Posed,
+    ) -> (Tensor, Tensor) {
+        let ballistic = g1 * 2.0 - g2;
+        let previous = self.linear_latent_posed(g1, before);
+        let inertia = Tensor::cat(
+            &[
+                self.linear_latent_posed(&ballistic, now),
+                self.linear_latent_posed(g1, now),
+            ],
+            1,
+        );
+        (previous, inertia)
     }
 
     /// Unskinned garments `[B, V, 3]` as displacements in the vertices' rest frames `[B, 3V]`.
@@ -602,13 +627,21 @@ impl Space {
 
     /// Skins canonical garments `[B, V, 3]` by the anchors' transforms `m [B, N, 12]`.
     pub fn skin(&self, canonical: &Tensor, m: &Tensor) -> Tensor {
-        Self::skin_blended(canonical, &self.blended(m))
+        let (rotation, shift) = self.blended(m);
+        skin_by(canonical, &rotation, &shift)
     }
 
-    /// [`Space::skin`] by per-vertex transforms already blended ([`Space::blended`]), for
-    /// callers that skin many garments under one pose.
-    pub fn skin_blended(canonical: &Tensor, (rot, shift): &(Tensor, Tensor)) -> Tensor {
-        rot.matmul(&canonical.unsqueeze(3)).squeeze_dim(3) + shift
+    /// Each vertex's blended transform under anchor transforms `m [B, N, 12]`, blended once
+    /// for callers that skin and unskin many garments under the same poses (no gradients).
+    pub fn posed(&self, m: &Tensor) -> Posed {
+        tch::no_grad(|| {
+            let (rotation, shift) = self.blended(m);
+            Posed {
+                inverse: inverse3(&rotation),
+                rotation,
+                shift,
+            }
+        })
     }
 
     /// Encode → decode → skin: the space's reconstruction of garments `g` with anchors at `b`
@@ -649,6 +682,45 @@ impl Space {
 
 /// A var store's tensors by name, sorted (the file's and Adam's order).
 /// Whether every one of the named variables exists and is all zero.
+/// Per-vertex blended transforms of a batch of poses ([`Space::posed`]): rotations
+/// `[B, V, 3, 3]`, their inverses and translations `[B, V, 3]`.
+pub struct Posed {
+    pub rotation: Tensor,
+    pub inverse: Tensor,
+    pub shift: Tensor,
+}
+
+impl Posed {
+    /// Canonical garments `[B, V, 3]` skinned by these transforms ([`Space::skin`]).
+    pub fn skin(&self, canonical: &Tensor) -> Tensor {
+        skin_by(canonical, &self.rotation, &self.shift)
+    }
+
+    /// The poses `idx` of the batch.
+    pub fn select(&self, idx: &Tensor) -> Posed {
+        Posed {
+            rotation: self.rotation.index_select(0, idx),
+            inverse: self.inverse.index_select(0, idx),
+            shift: self.shift.index_select(0, idx),
+        }
+    }
+
+    /// Batches joined in order.
+    pub fn cat(parts: &[Posed]) -> Posed {
+        let join =
+            |f: fn(&Posed) -> &Tensor| Tensor::cat(&parts.iter().map(f).collect::<Vec<_>>(), 0);
+        Posed {
+            rotation: join(|p| &p.rotation),
+            inverse: join(|p| &p.inverse),
+            shift: join(|p| &p.shift),
+        }
+    }
+}
+
+fn skin_by(canonical: &Tensor, rotation: &Tensor, shift: &Tensor) -> Tensor {
+    rotation.matmul(&canonical.unsqueeze(3)).squeeze_dim(3) + shift
+}
+
 pub fn all_zero(vs: &nn::VarStore, names: &[String]) -> bool {
     let vars = vs.variables();
     names.iter().all(|n| {

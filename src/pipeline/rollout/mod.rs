@@ -133,9 +133,14 @@ pub fn run(request: &Request, outputs: OutputSet, feedback: &Feedback) -> Result
     ));
     let bar = crate::progress::bar(poses.len() as u64, "roll-out", feedback.hide_bars);
     let collision_fix = settings.collision_fix;
-    let rollout = for_model(&file, &poses, 0, &init, settings.clone(), &mut |f| {
-        bar.set_position(f as u64 + 1)
-    })?;
+    let rollout = for_model(
+        &file,
+        &poses,
+        0..poses.len(),
+        &init,
+        settings.clone(),
+        &mut |f| bar.set_position(f as u64 + 1),
+    )?;
     bar.finish_and_clear();
     let restarts = match (r.restart_every, reference) {
         (Some(every), Some(first)) => Some(restarts(
@@ -345,11 +350,10 @@ fn restarts(
     for (k, &start) in starts.iter().enumerate() {
         let span = start..=start + every;
         let init = Init::Moving(reference[start.saturating_sub(2)..=start].to_vec());
-        let lead = crate::rollout::restart_lead(file, start)?;
         let rollout = for_model(
             file,
-            &poses[start - lead..=start + every],
-            lead,
+            poses,
+            start..start + every + 1,
             &init,
             settings.clone(),
             &mut |f| bar.set_position((k * every + f) as u64),
