@@ -67,27 +67,149 @@ const OVERLAP_REACH: f32 = 0.05;
 /// posed vertex within [`OVERLAP_REACH`] that was farther than [`SAME_PART`] at rest. Skinning
 /// lets limbs pass through each other (a chin into the chest when the head bows far); in
 /// ordinary poses every close vertex was close at rest too, and nothing is flagged.
-pub fn self_overlap(
-    rest: &[[f32; 3]],
-    points: &[[f32; 3]],
-    normals: &[[f32; 3]],
-    index: &PointIndex,
-) -> Vec<bool> {
+///
+/// Searched patch by patch ([`RestPatches`]): a vertex's posed neighbourhood is mostly its own
+/// part of the surface, so patches that were certainly within [`SAME_PART`] at rest are skipped
+/// whole, and only the vertices of the others are measured.
+pub fn self_overlap(rest: &[[f32; 3]], points: &[[f32; 3]], normals: &[[f32; 3]]) -> Vec<bool> {
     let v3 = |p: [f32; 3]| nalgebra::Vector3::from(p);
-    (0..points.len())
+    let patches = RestPatches::new(rest);
+    let posed = patches.posed(points);
+    let farthest = posed.radius.iter().copied().fold(0.0, f32::max);
+    let Ok(centres) = PointIndex::new(&posed.centre) else {
+        return vec![false; points.len()];
+    };
+    let mut overlap = vec![false; points.len()];
+    let found: Vec<Vec<(u32, bool)>> = (0..patches.members.len())
         .into_par_iter()
-        .map(|v| {
-            let other = index
-                .within(points[v], OVERLAP_REACH)
+        .map(|a| {
+            let reach = OVERLAP_REACH + posed.radius[a] + farthest + BOUND_SLACK;
+            let others: Vec<usize> = centres
+                .within(posed.centre[a], reach)
                 .into_iter()
-                .filter(|&(u, _)| (v3(rest[u as usize]) - v3(rest[v])).norm() > SAME_PART)
-                .min_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
-            other.is_some_and(|(u, _)| {
-                let u = u as usize;
-                (v3(points[v]) - v3(points[u])).dot(&v3(normals[u])) < 0.0
-            })
+                .map(|(b, _)| b as usize)
+                .filter(|&b| patches.may_be_apart(a, b))
+                .collect();
+            patches.members[a]
+                .iter()
+                .map(|&v| {
+                    let p = points[v as usize];
+                    let other = others
+                        .iter()
+                        .flat_map(|&b| patches.members[b].iter().copied())
+                        .filter_map(|u| {
+                            let q = points[u as usize];
+                            let d2 = (p[0] - q[0]) * (p[0] - q[0])
+                                + (p[1] - q[1]) * (p[1] - q[1])
+                                + (p[2] - q[2]) * (p[2] - q[2]);
+                            (d2 <= OVERLAP_REACH * OVERLAP_REACH).then(|| (u, d2.sqrt()))
+                        })
+                        .filter(|&(u, _)| {
+                            (v3(rest[u as usize]) - v3(rest[v as usize])).norm() > SAME_PART
+                        })
+                        .min_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+                    let inside = other.is_some_and(|(u, _)| {
+                        let u = u as usize;
+                        (v3(p) - v3(points[u])).dot(&v3(normals[u])) < 0.0
+                    });
+                    (v, inside)
+                })
+                .collect()
+        })
+        .collect();
+    for (v, inside) in found.into_iter().flatten() {
+        overlap[v as usize] = inside;
+    }
+    overlap
+}
+
+/// Rest vertices within this of a patch's seed vertex join its patch.
+const PATCH: f32 = 0.02;
+/// Room for rounding in the patch bounds (metres): a patch is skipped only when certainly out.
+const BOUND_SLACK: f32 = 1e-4;
+
+/// The body's vertices in small patches at rest (each vertex with the first unassigned vertex
+/// within [`PATCH`] of it, in vertex order): bounds on the distances between two patches'
+/// vertices, at rest and posed, from each patch's seed and radius.
+struct RestPatches {
+    seed: Vec<u32>,
+    members: Vec<Vec<u32>>,
+    /// Each patch's farthest member from its seed at rest.
+    radius: Vec<f32>,
+    rest: Vec<[f32; 3]>,
+}
+
+/// A posed body's patch seeds and the farthest member from each.
+struct PosedPatches {
+    centre: Vec<[f32; 3]>,
+    radius: Vec<f32>,
+}
+
+impl RestPatches {
+    fn new(rest: &[[f32; 3]]) -> RestPatches {
+        let mut patch = vec![u32::MAX; rest.len()];
+        let (mut seed, mut members) = (Vec::new(), Vec::<Vec<u32>>::new());
+        if let Ok(index) = PointIndex::new(rest) {
+            for v in 0..rest.len() {
+                if patch[v] != u32::MAX {
+                    continue;
+                }
+                let id = seed.len() as u32;
+                let mut group: Vec<u32> = index
+                    .within(rest[v], PATCH)
+                    .into_iter()
+                    .map(|(u, _)| u)
+                    .filter(|&u| patch[u as usize] == u32::MAX)
+                    .collect();
+                group.sort_unstable();
+                for &u in &group {
+                    patch[u as usize] = id;
+                }
+                seed.push(v as u32);
+                members.push(group);
+            }
+        }
+        let radius = spread(rest, &seed, &members);
+        RestPatches {
+            seed,
+            members,
+            radius,
+            rest: rest.to_vec(),
+        }
+    }
+
+    fn posed(&self, points: &[[f32; 3]]) -> PosedPatches {
+        PosedPatches {
+            centre: self.seed.iter().map(|&s| points[s as usize]).collect(),
+            radius: spread(points, &self.seed, &self.members),
+        }
+    }
+
+    /// Whether some vertex of patch `a` may have been farther than [`SAME_PART`] from some
+    /// vertex of patch `b` at rest.
+    fn may_be_apart(&self, a: usize, b: usize) -> bool {
+        let d = distance(
+            self.rest[self.seed[a] as usize],
+            self.rest[self.seed[b] as usize],
+        );
+        d + self.radius[a] + self.radius[b] > SAME_PART - BOUND_SLACK
+    }
+}
+
+/// Each patch's farthest member from its seed.
+fn spread(points: &[[f32; 3]], seed: &[u32], members: &[Vec<u32>]) -> Vec<f32> {
+    seed.iter()
+        .zip(members)
+        .map(|(&s, m)| {
+            m.iter()
+                .map(|&u| distance(points[s as usize], points[u as usize]))
+                .fold(0.0, f32::max)
         })
         .collect()
+}
+
+fn distance(a: [f32; 3], b: [f32; 3]) -> f32 {
+    (v3(a) - v3(b)).norm()
 }
 
 impl PosedBody {
@@ -101,7 +223,7 @@ impl PosedBody {
         let points = body.skin.skin_points(&body.mesh.positions, &skinning);
         let normals = body.skin.skin_normals(&body.normals, &skinning);
         let index = PointIndex::new(&points).expect("a posed body is finite and non-empty");
-        let overlap = self_overlap(&body.mesh.positions, &points, &normals, &index);
+        let overlap = self_overlap(&body.mesh.positions, &points, &normals);
         PosedBody {
             points,
             normals,

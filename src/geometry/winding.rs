@@ -219,6 +219,8 @@ struct Node {
     moment: Matrix3<f64>,
     /// Third-order moment Tⱼₖₗ: `third_moment[j]` = Σ (area·normal)ⱼ ∫(x−c)(x−c)ᵀ dA / area.
     third_moment: [Matrix3<f64>; 3],
+    /// The expansion as polynomial coefficients in `r` (from `normal`, `moment`, `third_moment`).
+    expansion: Expansion,
     /// Max distance from `centre` to the node's vertices (bounds all its points).
     radius: f64,
     /// Range of the node's triangles in `SurfaceIndex::triangles`.
@@ -266,6 +268,7 @@ impl Node {
             area,
             centre,
             normal,
+            expansion: Expansion::new(&normal, &moment, &third_moment),
             moment,
             third_moment,
             radius: vertex_radius(tris, ids, &centre),
@@ -298,12 +301,14 @@ impl Node {
                     + kid.normal[j] * delta * delta.transpose();
             }
         }
+        let normal = l.normal + r.normal;
         Node {
             bmin,
             bmax,
             area,
             centre,
-            normal: l.normal + r.normal,
+            normal,
+            expansion: Expansion::new(&normal, &moment, &third_moment),
             moment,
             third_moment,
             radius: vertex_radius(tris, ids, &centre),
@@ -314,25 +319,104 @@ impl Node {
     }
 
     /// Winding number of the node's triangles at `p` from the Taylor expansion about
-    /// the centre, given r = c − p and |r|². The kernel is f(x) = (x − p)/(4π|x − p|³):
-    /// - first order: N·f(c) = N·r/(4π|r|³);
-    /// - second: ∂ₖfⱼ = (δⱼₖ/|r|³ − 3rⱼrₖ/|r|⁵)/4π contracted with Mⱼₖ;
-    /// - third: ½ ∂ₗ∂ₖfⱼ = ½(−3(δⱼₖrₗ + δⱼₗrₖ + δₖₗrⱼ)/|r|⁵ + 15rⱼrₖrₗ/|r|⁷)/4π
-    ///   contracted with Tⱼₖₗ (symmetric in k, l).
+    /// the centre, given r = c − p and |r|² ([`Expansion`]).
     fn far_field(&self, r: &Vec3, dist2: f64) -> f64 {
-        let inv_d = 1.0 / dist2.sqrt();
-        let inv_d3 = inv_d * inv_d * inv_d;
-        let inv_d5 = inv_d3 * inv_d * inv_d;
-        let dipole = self.normal.dot(r) * inv_d3;
-        let second = self.moment.trace() * inv_d3 - 3.0 * r.dot(&(self.moment * r)) * inv_d5;
-        let mut delta_terms = 0.0;
-        let mut cubic = 0.0;
-        for (j, q) in self.third_moment.iter().enumerate() {
-            delta_terms += 2.0 * q.column(j).dot(r) + r[j] * q.trace();
-            cubic += r[j] * r.dot(&(q * r));
+        self.expansion.at(r, dist2)
+    }
+}
+
+/// A node's far field as a polynomial in `r = c − p` over powers of `1/|r|`, its coefficients
+/// precomputed from the moments (a query then costs a few dozen multiplies instead of 3×3
+/// matrix products). The kernel is f(x) = (x − p)/(4π|x − p|³):
+/// - first order: N·f(c) = N·r/(4π|r|³);
+/// - second: ∂ₖfⱼ = (δⱼₖ/|r|³ − 3rⱼrₖ/|r|⁵)/4π contracted with Mⱼₖ: tr M/|r|³ − 3 rᵀMr/|r|⁵;
+/// - third: ½ ∂ₗ∂ₖfⱼ = ½(−3(δⱼₖrₗ + δⱼₗrₖ + δₖₗrⱼ)/|r|⁵ + 15rⱼrₖrₗ/|r|⁷)/4π contracted with
+///   Tⱼₖₗ (symmetric in k, l): −(3/2) L·r/|r|⁵ + (15/2) T(r, r, r)/|r|⁷, with
+///   Lₖ = 2 Σⱼ Tⱼₖⱼ + Σⱼ Tₖⱼⱼ.
+#[derive(Clone, Debug)]
+struct Expansion {
+    /// N, and tr M.
+    normal: [f64; 3],
+    trace: f64,
+    /// rᵀMr as xx, yy, zz, xy, xz, yz coefficients.
+    quadratic: [f64; 6],
+    /// L.
+    linear: [f64; 3],
+    /// T(r, r, r) as coefficients of the ten cubic monomials ([`CUBIC`]).
+    cubic: [f64; 10],
+}
+
+/// The cubic monomials rₐr_br_c (a ≤ b ≤ c) in the order of [`Expansion::cubic`].
+const CUBIC: [[usize; 3]; 10] = [
+    [0, 0, 0],
+    [1, 1, 1],
+    [2, 2, 2],
+    [0, 0, 1],
+    [0, 0, 2],
+    [0, 1, 1],
+    [1, 1, 2],
+    [0, 2, 2],
+    [1, 2, 2],
+    [0, 1, 2],
+];
+
+impl Expansion {
+    fn new(normal: &Vec3, moment: &Matrix3<f64>, third: &[Matrix3<f64>; 3]) -> Expansion {
+        let m = |a: usize, b: usize| moment[(a, b)];
+        let mut cubic = [0.0; 10];
+        let mut linear = [0.0; 3];
+        for (j, q) in third.iter().enumerate() {
+            for k in 0..3 {
+                linear[k] += 2.0 * q[(k, j)];
+                for l in 0..3 {
+                    let mut monomial = [j, k, l];
+                    monomial.sort_unstable();
+                    if let Some(slot) = CUBIC.iter().position(|c| *c == monomial) {
+                        cubic[slot] += q[(k, l)];
+                    }
+                }
+            }
+            linear[j] += q.trace();
         }
-        let third = 0.5 * (15.0 * cubic * inv_d5 * inv_d * inv_d - 3.0 * delta_terms * inv_d5);
-        (dipole + second + third) / FOUR_PI
+        Expansion {
+            normal: [normal.x, normal.y, normal.z],
+            trace: moment.trace(),
+            quadratic: [
+                m(0, 0),
+                m(1, 1),
+                m(2, 2),
+                m(0, 1) + m(1, 0),
+                m(0, 2) + m(2, 0),
+                m(1, 2) + m(2, 1),
+            ],
+            linear,
+            cubic,
+        }
+    }
+
+    /// The winding number at `r = c − p`, `dist2 = |r|²`.
+    fn at(&self, r: &Vec3, dist2: f64) -> f64 {
+        let [x, y, z] = [r.x, r.y, r.z];
+        let inv_d2 = 1.0 / dist2;
+        let inv_d3 = inv_d2 / dist2.sqrt();
+        let inv_d5 = inv_d3 * inv_d2;
+        let (n, q, l, c) = (&self.normal, &self.quadratic, &self.linear, &self.cubic);
+        let first = n[0] * x + n[1] * y + n[2] * z + self.trace;
+        let quadratic =
+            q[0] * x * x + q[1] * y * y + q[2] * z * z + q[3] * x * y + q[4] * x * z + q[5] * y * z;
+        let linear = l[0] * x + l[1] * y + l[2] * z;
+        let cubic = c[0] * x * x * x
+            + c[1] * y * y * y
+            + c[2] * z * z * z
+            + c[3] * x * x * y
+            + c[4] * x * x * z
+            + c[5] * x * y * y
+            + c[6] * y * y * z
+            + c[7] * x * z * z
+            + c[8] * y * z * z
+            + c[9] * x * y * z;
+        (first * inv_d3 - (3.0 * quadratic + 1.5 * linear) * inv_d5 + 7.5 * cubic * inv_d5 * inv_d2)
+            / FOUR_PI
     }
 }
 

@@ -141,3 +141,52 @@ fn the_sample_body_is_inside_behind_its_skin_and_outside_in_front() {
     assert!(!surface.is_inside([0.0, 0.9, 1.0]));
     assert!(surface.is_inside([0.0, 0.95, 0.0]));
 }
+
+/// The body's self-overlap as [`garmentbake::body::self_overlap`] defines it, vertex by vertex
+/// through a radius query of the whole posed body: the reference for its patch-by-patch search.
+fn self_overlap_by_definition(rest: &[[f32; 3]], posed: &PosedBody) -> Vec<bool> {
+    let v3 = |p: [f32; 3]| nalgebra::Vector3::from(p);
+    (0..posed.points.len())
+        .map(|v| {
+            let other = posed
+                .index
+                .within(posed.points[v], 0.05)
+                .into_iter()
+                .filter(|&(u, _)| (v3(rest[u as usize]) - v3(rest[v])).norm() > 0.1)
+                .min_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+            other.is_some_and(|(u, _)| {
+                let u = u as usize;
+                (v3(posed.points[v]) - v3(posed.points[u])).dot(&v3(posed.normals[u])) < 0.0
+            })
+        })
+        .collect()
+}
+
+#[test]
+fn the_body_overlap_search_flags_what_its_definition_flags() {
+    let body = read_body(&sample("body.glb")).unwrap();
+    let clip = garmentbake::motion::load_clip(
+        &sample("motions/131_02.bvh"),
+        &Default::default(),
+        &body.skeleton,
+        Some(30.0),
+    )
+    .unwrap();
+    // Frame 92 has the clip's most overlapping vertices (2,272: the arms against the sides).
+    for frame in [0, 92, 250] {
+        let posed = PosedBody::new(&body, &clip.animation.local_pose(frame));
+        let expected = self_overlap_by_definition(&body.mesh.positions, &posed);
+        let flagged = |o: &[bool]| o.iter().filter(|&&x| x).count();
+        eprintln!(
+            "frame {frame}: {} vertices flagged",
+            flagged(&posed.overlap)
+        );
+        assert!(flagged(&expected) > 0, "frame {frame}: nothing to find");
+        assert!(
+            posed.overlap == expected,
+            "frame {frame}: {} flagged, {} by the definition",
+            flagged(&posed.overlap),
+            flagged(&expected)
+        );
+    }
+}
