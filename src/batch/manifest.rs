@@ -101,9 +101,10 @@ pub struct DynamicRecipe {
     pub preset: String,
     /// Epochs of the generative space (stage 1).
     pub space_epochs: usize,
-    /// Epochs of the motion encoder (stage 2; 0 keeps its ridge fit).
-    #[serde(default)]
-    pub dynamic_epochs: usize,
+    /// Epochs of the motion encoder's networks (stage 2, `train-dynamic --stage dynamic
+    /// --epochs`; 0 keeps its ridge fit). `dynamic_epochs` is its old name.
+    #[serde(default, alias = "dynamic_epochs")]
+    pub motion_epochs: usize,
     /// Epochs of the learnt dynamics (`train-dynamic --dynamics-epochs`; default: the
     /// command's, the recipe's 40). 0 for clips shorter than its 32-frame windows.
     pub dynamics_epochs: Option<usize>,
@@ -321,7 +322,20 @@ fn matches(pattern: &str, name: &str) -> bool {
 
 #[cfg(test)]
 mod tests {
-    use super::matches;
+    use super::{matches, DynamicRecipe};
+
+    #[test]
+    fn the_motion_stage_epochs_keep_their_old_name() {
+        let recipe = |key: &str| -> DynamicRecipe {
+            toml::from_str(&format!(
+                "train = [\"a\"]\nrollout = [\"b\"]\nspace_epochs = 1\n{key} = 7\n"
+            ))
+            .unwrap()
+        };
+        assert_eq!(recipe("motion_epochs").motion_epochs, 7);
+        assert_eq!(recipe("dynamic_epochs").motion_epochs, 7);
+        assert_eq!(recipe("dynamics_epochs").motion_epochs, 0);
+    }
 
     #[test]
     fn globs_match_like_a_shell() {

@@ -559,7 +559,7 @@ fn dynamic_jobs(b: &mut Builder, r: &Resolved, g: &Garment) -> Result<()> {
         args,
         &sidecar(g),
     )?;
-    let mut args = train_args("dynamic", d.dynamic_epochs)?;
+    let mut args = train_args("dynamic", d.motion_epochs)?;
     if let Some(n) = d.dynamics_epochs {
         args.extend([t("--dynamics-epochs"), t(n)]);
     }

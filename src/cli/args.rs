@@ -13,20 +13,14 @@ pub use training::{RefreshArg, TrainInputs, TRAIN_DEFAULTS, TRAIN_SHORT_HIDES};
 use anyhow::{bail, Result};
 use std::path::PathBuf;
 
-/// The motion-capture clips a command reads, and how.
+/// How clips are read: which joints map to the body's, and the clips' up axis and unit.
 #[derive(clap::Args)]
 #[command(next_help_heading = "Inputs")]
-pub struct ClipArgs {
-    /// BVH clip(s); repeat --motion for several.
-    #[arg(long = "motion", required = true)]
-    pub motions: Vec<PathBuf>,
+pub struct ClipReading {
     /// Joint-name map(s) (TOML); each applies to the clips whose joints it covers (the two CMU
     /// namings are recognised without one).
     #[arg(long = "map")]
     pub maps: Vec<PathBuf>,
-    /// Keep every n-th frame so clips play at this rate (must divide the source rate).
-    #[arg(long, value_parser = positive::<f32>())]
-    pub fps: Option<f32>,
     /// The clips' up axis (y, z, -y, x ...); detected from the motion when left out (the axis the
     /// head stays above the feet along). Z-up clips are turned a quarter turn about X.
     #[arg(long, value_parser = parse_up)]
@@ -37,10 +31,47 @@ pub struct ClipArgs {
     pub units: Option<crate::rig::capture::Units>,
 }
 
+impl ClipReading {
+    /// `motions` read this way, played at `fps` (their own rate if none).
+    pub fn clips(&self, motions: &[PathBuf], fps: Option<f32>) -> crate::pipeline::Clips {
+        crate::pipeline::Clips::new(motions, &self.maps, fps, self.up, self.units)
+    }
+}
+
+/// The motion-capture clips a command reads, and how, at their own rate or one the command sets
+/// (a dynamic model plays at its training rate).
+#[derive(clap::Args)]
+#[command(next_help_heading = "Inputs")]
+pub struct MotionArgs {
+    /// BVH clip(s); repeat --motion for several.
+    #[arg(long = "motion", required = true)]
+    pub motions: Vec<PathBuf>,
+    #[command(flatten)]
+    pub reading: ClipReading,
+}
+
+impl MotionArgs {
+    /// The clips as the pipeline's steps take them, played at `fps` (their own rate if none).
+    pub fn clips(&self, fps: Option<f32>) -> crate::pipeline::Clips {
+        self.reading.clips(&self.motions, fps)
+    }
+}
+
+/// [`MotionArgs`] with `--fps`: clips a command plays at a rate the user picks.
+#[derive(clap::Args)]
+#[command(next_help_heading = "Inputs")]
+pub struct ClipArgs {
+    #[command(flatten)]
+    pub motion: MotionArgs,
+    /// Keep every n-th frame so clips play at this rate (must divide the source rate).
+    #[arg(long, value_parser = positive::<f32>())]
+    pub fps: Option<f32>,
+}
+
 impl ClipArgs {
     /// The clips as the pipeline's steps take them.
     pub fn clips(&self) -> crate::pipeline::Clips {
-        crate::pipeline::Clips::new(&self.motions, &self.maps, self.fps, self.up, self.units)
+        self.motion.clips(self.fps)
     }
 }
 

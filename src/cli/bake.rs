@@ -150,6 +150,7 @@ impl Execute for Args {
         let fps = crate::models::swing::clip_rate(model.pbns()?, self.clips.fps)?;
         let clips = self
             .clips
+            .motion
             .motions
             .iter()
             .map(|p| load_clip(p, &maps, model.skeleton(), fps).map(|c| c.animation))

@@ -89,11 +89,8 @@ struct RolloutBench {
     #[arg(long, help_heading = "Inputs")]
     garment: PathBuf,
     /// The clip (one --motion), played at the model's rate.
-    #[arg(long, help_heading = "Inputs")]
-    motion: PathBuf,
-    /// Joint-name map(s) (TOML) for the clip.
-    #[arg(long = "map", help_heading = "Inputs")]
-    maps: Vec<PathBuf>,
+    #[command(flatten)]
+    clips: super::args::MotionArgs,
     #[command(flatten)]
     fabric: FabricArgs,
     /// Frames of the clip, from its start.
@@ -154,8 +151,7 @@ impl RolloutBench {
             model: self.model.clone(),
             body: self.body.clone(),
             garment: self.garment.clone(),
-            motion: self.motion.clone(),
-            maps: self.maps.clone(),
+            clips: self.clips.clips(None),
             fabric: self.fabric.fabric.clone(),
             frames: self.frames,
             plain: self.collision.settings(false)?,

@@ -6,7 +6,6 @@ use crate::interpolate::between;
 use crate::io::point_cache::read_pc2;
 use crate::io::point_cache::write_cache_in;
 use crate::metrics::vertex_distances_mm;
-use crate::motion::{load_clip, read_maps};
 use crate::simulate::stats::{self, ClipSetup, FrameStats};
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
@@ -26,12 +25,9 @@ pub struct Args {
     /// Dynamic model (.safetensors); the space stage is enough.
     #[arg(long, help_heading = "Inputs")]
     pub model: PathBuf,
-    /// The simulated clip (BVH), resampled to the model's rate.
-    #[arg(long, help_heading = "Inputs")]
-    pub motion: PathBuf,
-    /// Joint-name map(s) for the clip (TOML).
-    #[arg(long = "map", help_heading = "Inputs")]
-    pub maps: Vec<PathBuf>,
+    /// The simulated clip (one --motion), resampled to the model's rate.
+    #[command(flatten)]
+    pub clips: super::args::MotionArgs,
     /// The clip's simulation (.pc2 from `garmentbake simulate`, at the model's rate; its first
     /// frames are enough).
     #[arg(long, help_heading = "Inputs")]
@@ -88,8 +84,9 @@ impl Execute for Args {
         let outputs = output_set(&[("--out", Some(&self.out), POINT_CACHE)])?;
         let (file, _device) = crate::pipeline::load_model(&self.compute.compute(), &self.model)?;
         let fps = file.info.dynamic()?.fps;
-        let maps = read_maps(&self.maps)?;
-        let clip = load_clip(&self.motion, &maps, &file.body.skeleton, Some(fps))?.animation;
+        let clips = self.clips.clips(None);
+        let (motion, clip) = clips.load_single_at(&file.body.skeleton, Some(fps))?;
+        let clip = clip.animation;
         let sim = read_pc2(&self.sim, file.garment.vertex_count())?;
         // A simulation of the clip's first frames (`simulate --frames N`) is enough.
         let poses: Vec<_> = (0..clip.frame_count().min(sim.len()))
@@ -129,7 +126,7 @@ impl Execute for Args {
             .sum::<f64>()
             .sqrt();
         Ok(Report {
-            motion: self.motion.clone(),
+            motion: motion.to_path_buf(),
             fps,
             from_frame: a,
             to_frame: b,

@@ -73,7 +73,7 @@ impl Execute for Args {
             .provenance
             .push(("body".into(), self.body.display().to_string()));
         let mut clips = Vec::new();
-        let motions = &self.clips.motions;
+        let motions = &self.clips.motion.motions;
         let bar = crate::progress::bar(
             motions.len() as u64,
             "retarget",

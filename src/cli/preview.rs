@@ -25,12 +25,11 @@ pub struct Args {
     /// them), so a chained roll-out's cache can be shown.
     #[arg(long = "motion", help_heading = "Inputs")]
     pub motions: Vec<PathBuf>,
+    #[command(flatten)]
+    pub reading: super::args::ClipReading,
     /// Frames over which a later --motion clip blends in from the previous clip's last pose.
     #[arg(long, default_value_t = 15, help_heading = "Advanced")]
     pub fade: usize,
-    /// Joint-name map(s) for the clip (TOML).
-    #[arg(long = "map", help_heading = "Inputs")]
-    pub maps: Vec<PathBuf>,
     /// Garment mesh(es) drawn at rest, OBJ or USD (only without --motion).
     #[arg(long = "garment", help_heading = "Inputs")]
     pub garments: Vec<PathBuf>,
@@ -145,16 +144,14 @@ impl Args {
     fn request(&self) -> Request {
         Request {
             body: self.body.clone(),
-            motions: self.motions.clone(),
+            clips: self.reading.clips(&self.motions, self.fps),
             fade: self.fade,
-            maps: self.maps.clone(),
             garments: self.garments.clone(),
             caches: self.caches.clone(),
             cache_start: self.cache_start,
             side_by_side: self.side_by_side,
             error_vs: self.error_vs.clone(),
             error_scale_mm: self.error_scale_mm,
-            fps: self.fps,
             model: self.model.clone(),
             lbs: self.lbs,
             frames: self.frame_count,

@@ -42,12 +42,9 @@ pub struct Args {
     /// Dynamic model with its motion stage (.safetensors).
     #[arg(long, help_heading = "Inputs")]
     pub model: PathBuf,
-    /// BVH clip(s), played one after another.
-    #[arg(long = "motion", required = true, help_heading = "Inputs")]
-    pub motions: Vec<PathBuf>,
-    /// Joint-name map(s) (TOML) for the clips.
-    #[arg(long = "map", help_heading = "Inputs")]
-    pub maps: Vec<PathBuf>,
+    /// The clips, played one after another at the model's rate.
+    #[command(flatten)]
+    pub clips: super::args::MotionArgs,
     /// Where the roll-out starts: `rest` or a point cache whose first frame is the start.
     ///
     /// `rest`: the rest garment on the first pose, at rest; a point cache: its first frame is the
@@ -168,8 +165,7 @@ impl Execute for Args {
         let request = Request {
             model: self.model.clone(),
             compute: self.compute.compute(),
-            motions: self.motions.clone(),
-            maps: self.maps.clone(),
+            clips: self.clips.clips(None),
             fade: self.fade,
             init: (self.init != "rest").then(|| PathBuf::from(&self.init)),
             frames: self.frames,

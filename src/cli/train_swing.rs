@@ -126,7 +126,7 @@ impl Execute for Args {
         };
         let inputs = Inputs::read(
             model,
-            &self.clips.motions,
+            &self.clips.motion.motions,
             &self.clips.clips().reader()?,
             settings.fps,
         )?;
@@ -141,7 +141,7 @@ impl Execute for Args {
         say(&format!(
             "{frames} frames at {} fps from {} clip(s); {starts} sequence starts, {} steps per epoch",
             trainer.settings.fps,
-            self.clips.motions.len(),
+            self.clips.motion.motions.len(),
             trainer.steps_per_epoch()
         ));
         let opts = FitOptions {

@@ -5,7 +5,6 @@ use super::Feedback;
 use crate::compute::Compute;
 use crate::garment::Garment;
 use crate::io::gltf_body::read_body;
-use crate::motion::{load_clip, read_maps};
 use crate::rollout::timing::Timing;
 use crate::rollout::{for_model, Init, Settings};
 use crate::simulate::{self, Scene};
@@ -21,9 +20,8 @@ pub struct Request {
     /// The body and garment to simulate, the model's.
     pub body: PathBuf,
     pub garment: PathBuf,
-    /// The clip, played at the model's rate, and its joint-name maps.
-    pub motion: PathBuf,
-    pub maps: Vec<PathBuf>,
+    /// The one clip, played at the model's rate.
+    pub clips: super::Clips,
     /// The fabric (a FABRIC.toml or a preset name), read when the simulation starts.
     pub fabric: String,
     /// Frames of the clip, from its start.
@@ -74,8 +72,11 @@ pub fn run(request: &Request, feedback: &Feedback) -> Result<RolloutTimes> {
             file.garment.vertex_count()
         );
     }
-    let maps = read_maps(&r.maps)?;
-    let clip = load_clip(&r.motion, &maps, &body.skeleton, Some(fps))?.animation;
+    let clip = r
+        .clips
+        .load_single_at(&body.skeleton, Some(fps))?
+        .1
+        .animation;
     let n = r.frames.max(2).min(clip.frame_count());
     let poses: Vec<_> = (0..n).map(|f| clip.local_pose(f)).collect();
     let (say, hide_bar) = (feedback.say, feedback.hide_bars);

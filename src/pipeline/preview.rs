@@ -6,7 +6,7 @@ use crate::eval::model_frames;
 use crate::garment::Garment;
 use crate::io::gltf_body::read_body;
 use crate::models::file::{self, check_skeleton};
-use crate::motion::{chain, load_clip, read_maps};
+use crate::motion::{chain, load_clip};
 use crate::preview::layout::{shots_sheet, Drawn, Layout, Shot};
 use crate::preview::View;
 use crate::rig::{JointTransform, Skeleton};
@@ -17,11 +17,10 @@ use std::path::PathBuf;
 pub struct Request {
     /// Skinned body (glTF/glb).
     pub body: PathBuf,
-    /// Clips played one after another (the rest pose when empty).
-    pub motions: Vec<PathBuf>,
+    /// Clips played one after another at their `fps` (the rest pose when none).
+    pub clips: super::Clips,
     /// Frames over which a later clip blends in from the previous clip's last pose.
     pub fade: usize,
-    pub maps: Vec<PathBuf>,
     pub garments: Vec<PathBuf>,
     /// One point cache per garment (with clips).
     pub caches: Vec<PathBuf>,
@@ -32,7 +31,6 @@ pub struct Request {
     /// Colour cached garments by their distance to this cache.
     pub error_vs: Option<PathBuf>,
     pub error_scale_mm: f64,
-    pub fps: Option<f32>,
     /// A PBNS model whose garment is posed by the clips.
     pub model: Option<PathBuf>,
     /// With a model: plain LBS beside it.
@@ -74,7 +72,7 @@ pub fn sheet(args: &Request) -> Result<(image::RgbImage, usize)> {
         .zip(&garments)
         .map(|(p, g)| crate::io::point_cache::read_pc2(p, g.mesh.vertex_count()))
         .collect::<Result<Vec<_>>>()?;
-    let poses: Vec<Shown> = if args.motions.is_empty() {
+    let poses: Vec<Shown> = if args.clips.motions.is_empty() {
         if !args.caches.is_empty() {
             bail!("--cache plays a garment over a clip: add --motion");
         }
@@ -221,14 +219,16 @@ fn frame_label(fps: f32, frame: usize) -> String {
 
 /// The --motion clips' poses one after another (`motion::chain`) and their shared rate.
 fn played(args: &Request, skeleton: &Skeleton) -> Result<(f32, Vec<Vec<JointTransform>>)> {
-    let maps = read_maps(&args.maps)?;
+    let reader = args.clips.reader()?;
     let clips = args
+        .clips
         .motions
         .iter()
-        .map(|m| Ok(load_clip(m, &maps, skeleton, args.fps)?.animation))
+        .map(|m| Ok(load_clip(m, &reader, skeleton, args.clips.fps)?.animation))
         .collect::<Result<Vec<_>>>()?;
     let fps = clips.first().map_or(30.0, |c| c.fps);
     if let Some((m, c)) = args
+        .clips
         .motions
         .iter()
         .zip(&clips)

@@ -11,7 +11,6 @@ use crate::io::gltf_body::read_body;
 use crate::models::dynamic::SpaceShape;
 use crate::models::dynamic::{BodyAnchors, MotionShape};
 use crate::models::file::{DynamicEpoch, ModelFile, MotionEpoch, RolloutRound, Settled};
-use crate::motion::read_maps;
 use crate::rig::Skeleton;
 use crate::rollout::{for_model, Init, Settings as RolloutSettings};
 use crate::train::dynamic::{FrameData, Reconstruction, Sequence, Settings, SpaceTrainer};
@@ -201,11 +200,11 @@ fn sequences(
             sims.len()
         );
     }
-    let maps = read_maps(&clips.maps)?;
+    let reader = clips.reader()?;
     motions
         .iter()
         .zip(sims)
-        .map(|(m, s)| Sequence::load(m, s, &maps, skeleton, clips.fps, vertices))
+        .map(|(m, s)| Sequence::load(m, s, &reader, skeleton, clips.fps, vertices))
         .collect()
 }
 

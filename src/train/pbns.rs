@@ -21,7 +21,7 @@ use crate::models::pbns::flat;
 use crate::models::pose_features::{tensor_points, PoseBatch, PER_JOINT};
 use crate::models::sparse_skin;
 use crate::models::{Model, Pbns, PbnsShape};
-use crate::motion::{load_clip, read_maps};
+use crate::motion::{load_clip, ClipReader};
 use crate::rig::{weights, SkelAnimation};
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
@@ -155,7 +155,8 @@ pub struct InputFiles<'a> {
     pub body: &'a Path,
     pub garment: &'a Path,
     pub motions: &'a [PathBuf],
-    pub maps: &'a [PathBuf],
+    /// The joint maps and axes the clips are read with.
+    pub reader: &'a ClipReader,
     /// Resample the clips to this rate (see [`load_clip`]).
     pub fps: Option<f32>,
     /// A FABRIC.toml or a preset name.
@@ -177,11 +178,10 @@ impl Inputs {
             warnings.push(p);
         }
         let fabric = Fabric::load(files.fabric)?;
-        let maps = read_maps(files.maps)?;
         let mut clips = Vec::new();
         let mut motion_names = Vec::new();
         for m in files.motions {
-            clips.push(load_clip(m, &maps, &body.skeleton, files.fps)?.animation);
+            clips.push(load_clip(m, files.reader, &body.skeleton, files.fps)?.animation);
             motion_names.push(
                 m.file_name()
                     .map_or(String::new(), |n| n.to_string_lossy().into_owned()),

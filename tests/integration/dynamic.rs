@@ -1174,3 +1174,46 @@ fn a_latent_walk_ends_on_its_frames_and_previews_from_its_start() {
         );
     }
 }
+
+/// `--up` and `--units` reach the clip reader of the commands that read clips their own way
+/// (train-dynamic once read only the joint maps and dropped both; preview had neither): the
+/// reading line names them as given.
+#[test]
+fn the_clip_axis_and_unit_flags_reach_the_reader() {
+    let dir = out_dir("dyn_axes");
+    let sim = short_sim(&dir);
+    let space = dir.join("space.safetensors");
+    let mut train = vec!["train-dynamic"];
+    train.extend(SKIRT_ON_131_01);
+    train.extend([
+        "--sim",
+        sim.to_str().unwrap(),
+        "--fps",
+        "30",
+        "--epochs",
+        "0",
+    ]);
+    train.extend(["--out", space.to_str().unwrap()]);
+    let png = dir.join("preview.png");
+    let preview = [
+        "preview",
+        "--body",
+        "samples/body.glb",
+        "--motion",
+        "samples/motions/131_01.bvh",
+        "--frames",
+        "2",
+        "--out",
+        png.to_str().unwrap(),
+    ];
+    for args in [&train[..], &preview[..]] {
+        let o = garmentbake_in_root(&[args, &["--up", "y", "--units", "cm"]].concat());
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{err}");
+        assert!(
+            err.contains("up y (given)") && err.contains("units cm (given"),
+            "{}: {err}",
+            args[0]
+        );
+    }
+}

@@ -122,11 +122,12 @@ impl TrainInputs {
     /// Reads everything and builds the settings; warnings (garment fit) come back as lines.
     pub fn load(&self, epochs: usize, strict: bool) -> Result<(Inputs, Settings, Vec<String>)> {
         set_training_threads(self.compute.threads);
+        let reader = self.clips.clips().reader()?;
         let files = InputFiles {
             body: &self.body,
             garment: &self.garment,
-            motions: &self.clips.motions,
-            maps: &self.clips.maps,
+            motions: &self.clips.motion.motions,
+            reader: &reader,
             fps: self.clips.fps,
             fabric: &self.fabric.fabric,
         };

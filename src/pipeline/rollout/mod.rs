@@ -14,7 +14,8 @@ use crate::geometry::PointIndex;
 use crate::io::point_cache::{read_pc2, write_cache_in, write_caches_in};
 use crate::metrics::reference_error::{distances_mm, ReferenceError, Simulations};
 use crate::models::file::ModelFile;
-use crate::motion::{chain, load_clip, read_maps};
+use crate::motion::{chain, load_clip};
+use crate::pipeline::Clips;
 use crate::rig::weights::smooth_garment_skin;
 use crate::rig::{JointTransform, SkelAnimation};
 use crate::rollout::timing::Timing;
@@ -32,9 +33,9 @@ pub struct Request {
     /// Dynamic model with its motion stage.
     pub model: PathBuf,
     pub compute: Compute,
-    /// Clips played one after another, each later one blended in over `fade` frames.
-    pub motions: Vec<PathBuf>,
-    pub maps: Vec<PathBuf>,
+    /// Clips played one after another at the model's rate (theirs is ignored), each later one
+    /// blended in over `fade` frames.
+    pub clips: Clips,
     pub fade: usize,
     /// A point cache whose first frame is the starting garment; none: the rest garment.
     pub init: Option<PathBuf>,
@@ -90,11 +91,12 @@ pub fn run(request: &Request, outputs: OutputSet, feedback: &Feedback) -> Result
     let info = file.info.dynamic()?;
     let fps = info.fps;
     let skeleton = &file.body.skeleton;
-    let maps = read_maps(&r.maps)?;
+    let reader = r.clips.reader()?;
     let clips = r
+        .clips
         .motions
         .iter()
-        .map(|m| Ok(load_clip(m, &maps, skeleton, Some(fps))?.animation))
+        .map(|m| Ok(load_clip(m, &reader, skeleton, Some(fps))?.animation))
         .collect::<Result<Vec<_>>>()?;
     let mut poses = chain(&clips.iter().collect::<Vec<_>>(), r.fade);
     let clip_frames = poses.len();
@@ -110,7 +112,7 @@ pub fn run(request: &Request, outputs: OutputSet, feedback: &Feedback) -> Result
             }
         }
     };
-    if !r.references.is_empty() && r.motions.len() != 1 {
+    if !r.references.is_empty() && r.clips.motions.len() != 1 {
         bail!("--reference measures a single clip: give one --motion");
     }
     let references = r
@@ -228,7 +230,7 @@ pub fn run(request: &Request, outputs: OutputSet, feedback: &Feedback) -> Result
     let (first, lbs_reference, all) =
         errors_against_references(&r.references, &references, &rollout.frames, lbs.as_deref());
     Ok(Report {
-        motions: r.motions.clone(),
+        motions: r.clips.motions.clone(),
         fps,
         frames: rollout.frames.len(),
         collision_fix,
