@@ -72,8 +72,8 @@ pub fn eval_131_02(out: &Path) {
     ]);
 }
 
-/// 131_02 at 4 fps: the whole walk in 42 frames. eval's metrics cost about a quarter of a CPU
-/// second per frame here (312 frames at 30 fps: 80 s), so caches whose checks hold frame by frame
+/// 131_02 at 4 fps: the whole walk in 42 frames. eval's metrics cost about a fifth of a CPU
+/// second per frame here (312 frames at 30 fps: 31–37 s on 2 cores), so caches whose checks hold frame by frame
 /// (a writer's samples against the same command's PC2) are made at this rate.
 pub const FRAMES_AT_4: usize = 42;
 
