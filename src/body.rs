@@ -1,9 +1,10 @@
 //! The rigged body (mesh, normals, skin on a skeleton), the body in one pose, and where points
 //! lie relative to it. Every model, metric and simulation collides with this one body.
 
-use crate::geometry::{v3, PointIndex, TriMesh};
+use crate::geometry::{distance, distance2, v3, PointIndex, TriMesh};
 use crate::rig::{JointTransform, Skeleton, Skin};
 use rayon::prelude::*;
+use std::sync::OnceLock;
 
 /// A rigged body: welded-or-not triangle mesh, per-vertex normals and a skin on a skeleton.
 #[derive(Clone, Debug)]
@@ -13,6 +14,33 @@ pub struct Body {
     pub normals: Vec<[f32; 3]>,
     pub skeleton: Skeleton,
     pub skin: Skin,
+    /// The rest surface in patches for [`self_overlap`], built on first use: it depends on the
+    /// body alone, and every posed frame needs it.
+    patches: OnceLock<RestPatches>,
+}
+
+impl Body {
+    pub fn new(
+        name: String,
+        mesh: TriMesh,
+        normals: Vec<[f32; 3]>,
+        skeleton: Skeleton,
+        skin: Skin,
+    ) -> Body {
+        Body {
+            name,
+            mesh,
+            normals,
+            skeleton,
+            skin,
+            patches: OnceLock::new(),
+        }
+    }
+
+    fn rest_patches(&self) -> &RestPatches {
+        self.patches
+            .get_or_init(|| RestPatches::new(&self.mesh.positions))
+    }
 }
 
 /// Signed distance of each point along the normal of its nearest body vertex (negative: inside).
@@ -71,9 +99,12 @@ const OVERLAP_REACH: f32 = 0.05;
 /// Searched patch by patch ([`RestPatches`]): a vertex's posed neighbourhood is mostly its own
 /// part of the surface, so patches that were certainly within [`SAME_PART`] at rest are skipped
 /// whole, and only the vertices of the others are measured.
-pub fn self_overlap(rest: &[[f32; 3]], points: &[[f32; 3]], normals: &[[f32; 3]]) -> Vec<bool> {
-    let v3 = |p: [f32; 3]| nalgebra::Vector3::from(p);
-    let patches = RestPatches::new(rest);
+fn self_overlap(
+    patches: &RestPatches,
+    rest: &[[f32; 3]],
+    points: &[[f32; 3]],
+    normals: &[[f32; 3]],
+) -> Vec<bool> {
     let posed = patches.posed(points);
     let farthest = posed.radius.iter().copied().fold(0.0, f32::max);
     let Ok(centres) = PointIndex::new(&posed.centre) else {
@@ -98,15 +129,10 @@ pub fn self_overlap(rest: &[[f32; 3]], points: &[[f32; 3]], normals: &[[f32; 3]]
                         .iter()
                         .flat_map(|&b| patches.members[b].iter().copied())
                         .filter_map(|u| {
-                            let q = points[u as usize];
-                            let d2 = (p[0] - q[0]) * (p[0] - q[0])
-                                + (p[1] - q[1]) * (p[1] - q[1])
-                                + (p[2] - q[2]) * (p[2] - q[2]);
+                            let d2 = distance2(p, points[u as usize]);
                             (d2 <= OVERLAP_REACH * OVERLAP_REACH).then(|| (u, d2.sqrt()))
                         })
-                        .filter(|&(u, _)| {
-                            (v3(rest[u as usize]) - v3(rest[v as usize])).norm() > SAME_PART
-                        })
+                        .filter(|&(u, _)| distance(rest[u as usize], rest[v as usize]) > SAME_PART)
                         .min_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
                     let inside = other.is_some_and(|(u, _)| {
                         let u = u as usize;
@@ -131,12 +157,14 @@ const BOUND_SLACK: f32 = 1e-4;
 /// The body's vertices in small patches at rest (each vertex with the first unassigned vertex
 /// within [`PATCH`] of it, in vertex order): bounds on the distances between two patches'
 /// vertices, at rest and posed, from each patch's seed and radius.
+#[derive(Clone, Debug)]
 struct RestPatches {
     seed: Vec<u32>,
     members: Vec<Vec<u32>>,
     /// Each patch's farthest member from its seed at rest.
     radius: Vec<f32>,
-    rest: Vec<[f32; 3]>,
+    /// Each patch's seed at rest.
+    seed_rest: Vec<[f32; 3]>,
 }
 
 /// A posed body's patch seeds and the farthest member from each.
@@ -170,11 +198,12 @@ impl RestPatches {
             }
         }
         let radius = spread(rest, &seed, &members);
+        let seed_rest = seed.iter().map(|&s| rest[s as usize]).collect();
         RestPatches {
             seed,
             members,
             radius,
-            rest: rest.to_vec(),
+            seed_rest,
         }
     }
 
@@ -188,10 +217,7 @@ impl RestPatches {
     /// Whether some vertex of patch `a` may have been farther than [`SAME_PART`] from some
     /// vertex of patch `b` at rest.
     fn may_be_apart(&self, a: usize, b: usize) -> bool {
-        let d = distance(
-            self.rest[self.seed[a] as usize],
-            self.rest[self.seed[b] as usize],
-        );
+        let d = distance(self.seed_rest[a], self.seed_rest[b]);
         d + self.radius[a] + self.radius[b] > SAME_PART - BOUND_SLACK
     }
 }
@@ -208,10 +234,6 @@ fn spread(points: &[[f32; 3]], seed: &[u32], members: &[Vec<u32>]) -> Vec<f32> {
         .collect()
 }
 
-fn distance(a: [f32; 3], b: [f32; 3]) -> f32 {
-    (v3(a) - v3(b)).norm()
-}
-
 impl PosedBody {
     /// Signed distance of `p` along the normal of body vertex `b` (negative: behind it).
     pub fn offset(&self, p: [f32; 3], b: u32) -> f32 {
@@ -223,7 +245,7 @@ impl PosedBody {
         let points = body.skin.skin_points(&body.mesh.positions, &skinning);
         let normals = body.skin.skin_normals(&body.normals, &skinning);
         let index = PointIndex::new(&points).expect("a posed body is finite and non-empty");
-        let overlap = self_overlap(&body.mesh.positions, &points, &normals);
+        let overlap = self_overlap(body.rest_patches(), &body.mesh.positions, &points, &normals);
         PosedBody {
             points,
             normals,

@@ -43,7 +43,7 @@ pub struct Comparison {
     /// Mean edge strain (%) of the skinned body under the garment: a garment that does not
     /// slide over the body stretches as much.
     pub body_strain_pct: f64,
-    /// Body vertices inside another part of the body (see [`crate::body::self_overlap`]), per frame.
+    /// Body vertices inside another part of the body (see [`crate::body::PosedBody::overlap`]), per frame.
     pub body_overlap: Vec<usize>,
     /// Vertices inside the body by winding number, and how deep, one per series.
     pub inside: Vec<Inside>,

@@ -37,6 +37,20 @@ pub fn v3(p: [f32; 3]) -> Vec3 {
     Vec3::new(p[0], p[1], p[2])
 }
 
+/// Squared distance between two stored positions (no square root: for comparisons with a
+/// squared radius).
+#[inline]
+pub fn distance2(a: [f32; 3], b: [f32; 3]) -> f32 {
+    let d = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+}
+
+/// Distance between two stored positions.
+#[inline]
+pub fn distance(a: [f32; 3], b: [f32; 3]) -> f32 {
+    (v3(a) - v3(b)).norm()
+}
+
 /// Converts a vector back into stored form.
 #[inline]
 pub fn arr3(v: Vec3) -> [f32; 3] {

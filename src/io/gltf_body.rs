@@ -100,13 +100,7 @@ fn body_of(doc: &gltf::Document, buffers: &[gltf::buffer::Data]) -> Result<Body,
     let (skeleton, remap) = read_skeleton(doc, &skin, buffers)?;
     let (tri, normals, skin) = read_mesh(&mesh, buffers, &remap)?;
     let name = node.name().or(mesh.name()).unwrap_or("body").to_string();
-    Ok(Body {
-        name,
-        mesh: tri,
-        normals,
-        skeleton,
-        skin,
-    })
+    Ok(Body::new(name, tri, normals, skeleton, skin))
 }
 
 /// Skeleton from the skin's joints, sorted parents-first; `remap[old skin slot] = new joint index`.

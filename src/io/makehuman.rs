@@ -76,13 +76,7 @@ impl MakeHuman {
         let skeleton = self.skeleton()?;
         let skin = self.skin(&skeleton, &source, 4)?;
         let normals = crate::geometry::normals::vertex_normals(&mesh.positions, &mesh.triangles);
-        Ok(Body {
-            name: "body".into(),
-            mesh,
-            normals,
-            skeleton,
-            skin,
-        })
+        Ok(Body::new("body".into(), mesh, normals, skeleton, skin))
     }
 
     /// Joints at the centres of their head markers, world-aligned frames (identity rest rotations).

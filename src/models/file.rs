@@ -721,19 +721,19 @@ pub fn load(path: &Path, device: Device) -> Result<ModelFile> {
     let info = info_of(path, &bytes)?;
     let lbs = skin_of(&tensors.view("lbs.joints")?, &tensors.view("lbs.weights")?)?;
     let skeleton = Skeleton::from_plain(&info.skeleton).map_err(|e| tensors.fail(e.to_string()))?;
-    let body = Body {
-        name: info.body.name.clone(),
-        mesh: TriMesh::new(
+    let body = Body::new(
+        info.body.name.clone(),
+        TriMesh::new(
             points(&tensors.view("body.points")?)?,
             triangles(&tensors.view("body.triangles")?)?,
         ),
-        normals: points(&tensors.view("body.normals")?)?,
+        points(&tensors.view("body.normals")?)?,
         skeleton,
-        skin: skin_of(
+        skin_of(
             &tensors.view("body.joints")?,
             &tensors.view("body.weights")?,
         )?,
-    };
+    );
     let garment = TriMesh {
         positions: points(&tensors.view("garment.rest")?)?,
         triangles: info.garment.faces.clone(),

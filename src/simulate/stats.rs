@@ -3,7 +3,7 @@
 
 use crate::body::{Body, PosedBody};
 use crate::geometry::edges::unique_edges;
-use crate::geometry::{v3, SurfaceIndex};
+use crate::geometry::{distance, SurfaceIndex};
 use crate::metrics::{Edges, Inside, InsideFrame};
 use crate::rig::JointTransform;
 use anyhow::{bail, Result};
@@ -92,7 +92,7 @@ pub fn of(
                 pinned_error_mm: 1e3
                     * s.pinned
                         .iter()
-                        .map(|&v| distance(x[v as usize], targets[f][v as usize]))
+                        .map(|&v| distance(x[v as usize], targets[f][v as usize]) as f64)
                         .fold(0.0, f64::max),
             };
             (inside, stats)
@@ -152,12 +152,8 @@ pub fn check(frames: &[Vec<[f32; 3]>], fps: f32, limit: f32, lead_in: usize) -> 
 fn max_step(a: &[[f32; 3]], b: &[[f32; 3]]) -> f64 {
     a.iter()
         .zip(b)
-        .map(|(p, q)| distance(*p, *q))
+        .map(|(p, q)| distance(*p, *q) as f64)
         .fold(0.0, f64::max)
-}
-
-fn distance(a: [f32; 3], b: [f32; 3]) -> f64 {
-    (v3(a) - v3(b)).norm() as f64
 }
 
 #[cfg(test)]
