@@ -7,7 +7,7 @@ mod training;
 
 pub use crate::pipeline::outputs::{output_set, Writes, ASSET, MODEL, PNG, POINT_CACHE};
 pub use parse::{non_negative, parse_units, parse_up, positive, FiniteNumber};
-pub use short_help::{short_help, SHORT_HELP_NOTE};
+pub use short_help::{short_help, NO_IDS, SHORT_HELP_NOTE};
 pub use training::{RefreshArg, TrainInputs, TRAIN_DEFAULTS, TRAIN_SHORT_HIDES};
 
 use anyhow::{bail, Result};

@@ -2,7 +2,7 @@
 //! `garmentbake bench rollout`: a dynamic model's roll-out against Blender's cloth solver on the
 //! same frames, in the same run. `bench swing`: the swing trainer's setup and epochs.
 
-use super::args::{short_help, CollisionFixArgs, ComputeArgs, FabricArgs, OutputArgs};
+use super::args::{short_help, CollisionFixArgs, ComputeArgs, FabricArgs, OutputArgs, NO_IDS};
 use super::args::{TrainInputs, SHORT_HELP_NOTE, TRAIN_SHORT_HIDES};
 use super::Execute;
 use crate::bake::compress::Targets;
@@ -106,7 +106,7 @@ struct RolloutBench {
 
 #[derive(clap::Args)]
 #[command(after_help = SHORT_HELP_NOTE)]
-#[command(mut_args(short_help(&TRAIN_SHORT_HIDES, Vec::new())))]
+#[command(mut_args(short_help(TRAIN_SHORT_HIDES, NO_IDS)))]
 struct TrainBench {
     #[command(flatten)]
     inputs: TrainInputs,

@@ -1,7 +1,9 @@
 //! `garmentbake compare`: caches of one clip against perturbed simulations of it, measured so
 //! that dynamics show (library: src/pipeline/compare.rs, src/compare.rs).
 
-use super::args::{output_set, short_help, ClipArgs, CollisionFixArgs, ComputeArgs, OutputArgs};
+use super::args::{
+    output_set, short_help, ClipArgs, CollisionFixArgs, ComputeArgs, OutputArgs, NO_IDS,
+};
 use super::args::{PNG, SHORT_HELP_NOTE};
 use super::Execute;
 use crate::compare::{Report, Settings};
@@ -28,7 +30,7 @@ pub(super) const SHORT_HIDES: [&str; 2] = ["up", "units"];
 /// spectrum; and strain mean / p99, inside the body, jitter. See docs/dynamic.md.
 #[derive(clap::Args)]
 #[command(after_help = SHORT_HELP_NOTE)]
-#[command(mut_args(short_help(&SHORT_HIDES, Vec::new())))]
+#[command(mut_args(short_help(SHORT_HIDES, NO_IDS)))]
 pub struct Args {
     /// Skinned body (glTF/glb) the caches were played on.
     #[arg(long, help_heading = "Inputs")]

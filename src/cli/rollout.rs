@@ -2,7 +2,9 @@
 //! cache (PC2, MDD, USD) or a compressed glTF, with its errors against reference simulations
 //! (library: src/pipeline/rollout/).
 
-use super::args::{output_set, short_help, CollisionFixArgs, ComputeArgs, OutputArgs, Writes};
+use super::args::{
+    output_set, short_help, CollisionFixArgs, ComputeArgs, OutputArgs, Writes, NO_IDS,
+};
 use super::args::{POINT_CACHE, SHORT_HELP_NOTE};
 use super::Execute;
 use crate::bake::compress::Targets;
@@ -37,7 +39,7 @@ pub(super) const SHORT_HIDES: [&str; 3] = ["float_targets", "out_units", "out_up
 /// far from them as they are from each other is as close as a re-run of the simulator.
 #[derive(clap::Args)]
 #[command(after_help = SHORT_HELP_NOTE)]
-#[command(mut_args(short_help(&SHORT_HIDES, Vec::new())))]
+#[command(mut_args(short_help(SHORT_HIDES, NO_IDS)))]
 pub struct Args {
     /// Dynamic model with its motion stage (.safetensors).
     #[arg(long, help_heading = "Inputs")]

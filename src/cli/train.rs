@@ -1,6 +1,6 @@
 //! `garmentbake train`: unsupervised PBNS training of a garment on a body and motion clips.
 
-use super::args::{output_set, short_help, OutputArgs, TrainInputs, Writes, MODEL};
+use super::args::{output_set, short_help, OutputArgs, TrainInputs, Writes, MODEL, NO_IDS};
 use super::args::{SHORT_HELP_NOTE, TRAIN_DEFAULTS, TRAIN_SHORT_HIDES};
 use super::Execute;
 use crate::models::file::EpochRecord;
@@ -30,7 +30,7 @@ use std::path::PathBuf;
 /// logging; `--log` has the same per epoch.
 #[derive(clap::Args)]
 #[command(after_help = SHORT_HELP_NOTE)]
-#[command(mut_args(short_help(&TRAIN_SHORT_HIDES, Vec::new())))]
+#[command(mut_args(short_help(TRAIN_SHORT_HIDES, NO_IDS)))]
 pub struct Args {
     #[command(flatten)]
     pub inputs: TrainInputs,

@@ -34,7 +34,7 @@ pub(super) const SHORT_HIDES: [&str; 5] = ["maps", "up", "units", "latent", "dyn
 /// epoch; --resume continues from it.
 #[derive(clap::Args)]
 #[command(after_help = SHORT_HELP_NOTE)]
-#[command(mut_args(short_help(&SHORT_HIDES, CollisionFixArgs::ids())))]
+#[command(mut_args(short_help(SHORT_HIDES, CollisionFixArgs::ids())))]
 pub struct Args {
     /// Skinned body (glTF/glb) the simulations used (stage space).
     #[arg(long, required_if_eq("stage", "space"), help_heading = "Inputs")]

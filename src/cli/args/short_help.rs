@@ -2,9 +2,13 @@
 
 /// `-h` for the common path (issue 39), for a command's `#[command(mut_args(...))]`: the flags
 /// under "Advanced" and the ids in `brief` are left out of `-h` (`--help` shows them); the ids in
-/// `hidden` are shown by neither, and still parse.
-pub fn short_help(brief: &[&str], hidden: Vec<String>) -> impl FnMut(clap::Arg) -> clap::Arg {
-    let brief: Vec<String> = brief.iter().map(|s| s.to_string()).collect();
+/// `hidden` are shown by neither, and still parse ([`NO_IDS`] for no such ids).
+pub fn short_help(
+    brief: impl IntoIterator<Item = impl ToString>,
+    hidden: impl IntoIterator<Item = impl ToString>,
+) -> impl FnMut(clap::Arg) -> clap::Arg {
+    let brief: Vec<String> = brief.into_iter().map(|s| s.to_string()).collect();
+    let hidden: Vec<String> = hidden.into_iter().map(|s| s.to_string()).collect();
     move |a| {
         let id = a.get_id().to_string();
         if hidden.contains(&id) {
@@ -16,6 +20,9 @@ pub fn short_help(brief: &[&str], hidden: Vec<String>) -> impl FnMut(clap::Arg) 
         }
     }
 }
+
+/// No ids, for either list of [`short_help`].
+pub const NO_IDS: [&str; 0] = [];
 
 /// What the help says under the flags when [`short_help`] left some out of `-h`.
 pub const SHORT_HELP_NOTE: &str = "-h shows the common flags; --help shows every flag (the \
