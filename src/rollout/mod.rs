@@ -211,22 +211,24 @@ pub fn roll_out(
         collision_after: vec![0.0],
     };
     let mut history: Vec<Tensor> = start.iter().map(|g| to_tensor(g, device)).collect();
-    // The linear path blends each frame's seed transforms once: to skin it, and a frame later
-    // to unskin its garment.
-    let posed = |f: usize| linear_only.then(|| space.posed(&at(f).transforms));
-    let mut posed_before = posed(first);
+    // Each frame's body is selected once and kept for the next frame's `before`; the linear
+    // path blends its seed transforms once: to skin it, and a frame later to unskin its garment.
+    let posed = |b: &BodyFrames| linear_only.then(|| space.posed(&b.transforms));
+    let mut body_before = at(first);
+    let mut posed_before = posed(&body_before);
     progress(0);
     for (t, pose) in poses.iter().enumerate().skip(first + 1) {
         let mut timing = FrameTiming::default();
         let clock = Instant::now();
         let back = |k: usize| history[history.len().saturating_sub(k)].shallow_clone();
+        let now = at(t);
+        let posed_now = posed(&now);
         let h = History {
             garment: [back(1), back(2), back(3)],
-            before: at(t - 1),
-            now: at(t),
+            before: body_before,
+            now,
             fps,
         };
-        let posed_now = posed(t);
         let x = match (&posed_before, &posed_now) {
             (Some(before), Some(now)) => {
                 model.linear_step_inputs(&h, (before, now), model.past_drives(&drives, t)?)?
@@ -298,6 +300,7 @@ pub fn roll_out(
         out.timings.push(timing);
         out.collision_before.push(before);
         out.collision_after.push(after);
+        body_before = h.now;
         progress(t - first);
     }
     Ok(out)
