@@ -360,6 +360,27 @@ const CUBIC: [[usize; 3]; 10] = [
     [0, 1, 2],
 ];
 
+/// The slot in [`CUBIC`] of the monomial rⱼrₖrₗ, for any order of j, k, l.
+const CUBIC_SLOT: [[[usize; 3]; 3]; 3] = cubic_slots();
+
+const fn cubic_slots() -> [[[usize; 3]; 3]; 3] {
+    let mut slots = [[[0; 3]; 3]; 3];
+    let mut i = 0;
+    while i < CUBIC.len() {
+        let [a, b, c] = CUBIC[i];
+        // Every ordering of (a, b, c).
+        let orders = [[a, b, c], [a, c, b], [b, a, c], [b, c, a], [c, a, b], [c, b, a]];
+        let mut o = 0;
+        while o < orders.len() {
+            let [j, k, l] = orders[o];
+            slots[j][k][l] = i;
+            o += 1;
+        }
+        i += 1;
+    }
+    slots
+}
+
 impl Expansion {
     fn new(normal: &Vec3, moment: &Matrix3<f64>, third: &[Matrix3<f64>; 3]) -> Expansion {
         let m = |a: usize, b: usize| moment[(a, b)];
@@ -369,11 +390,7 @@ impl Expansion {
             for k in 0..3 {
                 linear[k] += 2.0 * q[(k, j)];
                 for l in 0..3 {
-                    let mut monomial = [j, k, l];
-                    monomial.sort_unstable();
-                    if let Some(slot) = CUBIC.iter().position(|c| *c == monomial) {
-                        cubic[slot] += q[(k, l)];
-                    }
+                    cubic[CUBIC_SLOT[j][k][l]] += q[(k, l)];
                 }
             }
             linear[j] += q.trace();
