@@ -47,10 +47,14 @@ struct CrossRig {
     origin: Vector3<f32>,
     /// Mean horizontal hip path distance (m).
     hip_horizontal: f32,
-    /// Horizontal path length of a over b's.
+    /// The scale of b's horizontal path (about its mean) that best fits a's, least squares.
     stride_ratio: f32,
     /// Hip path distance with b's horizontal path scaled by `stride_ratio` (m).
     hip_fitted: f32,
+    /// Mean and spread of a's hip height above b's (m).
+    hip_level: (f32, f32),
+    /// Hip path distance with the stride scale fitted and the mean height difference removed (m).
+    hip_shape: f32,
     hip_mean: f32,
     hip_max: f32,
     angles: Vec<(&'static str, f32)>,
@@ -103,18 +107,9 @@ fn cross_rig(a: &SkelAnimation, b: &SkelAnimation, sk: &Skeleton) -> CrossRig {
     let hip_max = distances(lag).into_iter().fold(0.0, f32::max);
     let origin = offset(lag);
     let hip_horizontal = horizontal(lag);
-    // The same path up to the exports' stride scale: b's horizontal path scaled about its mean by
-    // the ratio of the horizontal path lengths.
+    // The same path up to the exports' stride scale: b's horizontal path scaled about its mean,
+    // the scale fitted to a's by least squares.
     let p = pairs(lag);
-    let length = |path: &dyn Fn(usize) -> Vector3<f32>| -> f32 {
-        p.windows(2)
-            .map(|w| {
-                let d = path(w[1].0) - path(w[0].0);
-                (d.x * d.x + d.z * d.z).sqrt()
-            })
-            .sum()
-    };
-    let stride_ratio = length(&|i| pa[i][hips]) / length(&|i| pb[p[0].1 + i - p[0].0][hips]);
     let mean = |path: &dyn Fn(usize) -> Vector3<f32>| -> Vector3<f32> {
         p.iter().map(|&(fa, _)| path(fa)).sum::<Vector3<f32>>() / p.len() as f32
     };
@@ -122,6 +117,13 @@ fn cross_rig(a: &SkelAnimation, b: &SkelAnimation, sk: &Skeleton) -> CrossRig {
         mean(&|i| pa[i][hips]),
         mean(&|i| pb[p[0].1 + i - p[0].0][hips]),
     );
+    let (mut ab, mut bb) = (0.0, 0.0);
+    for &(fa, fb) in &p {
+        let (x, y) = ((pa[fa][hips] - ma).xz(), (pb[fb][hips] - mb).xz());
+        ab += x.dot(&y);
+        bb += y.dot(&y);
+    }
+    let stride_ratio = ab / bb;
     let fitted: Vec<f32> = p
         .iter()
         .map(|&(fa, fb)| {
@@ -132,6 +134,21 @@ fn cross_rig(a: &SkelAnimation, b: &SkelAnimation, sk: &Skeleton) -> CrossRig {
         })
         .collect();
     let hip_fitted = fitted.iter().sum::<f32>() / fitted.len() as f32;
+    let dy: Vec<f32> = p
+        .iter()
+        .map(|&(fa, fb)| pa[fa][hips].y - pb[fb][hips].y)
+        .collect();
+    let level = dy.iter().sum::<f32>() / dy.len() as f32;
+    let spread = (dy.iter().map(|d| (d - level).powi(2)).sum::<f32>() / dy.len() as f32).sqrt();
+    let shape: Vec<f32> = p
+        .iter()
+        .map(|&(fa, fb)| {
+            let mut d = (pa[fa][hips] - ma) - (pb[fb][hips] - mb) * stride_ratio;
+            d.y = pa[fa][hips].y - pb[fb][hips].y - level;
+            d.norm()
+        })
+        .collect();
+    let hip_shape = shape.iter().sum::<f32>() / shape.len() as f32;
     type Angle = (
         &'static str,
         (&'static str, &'static str),
@@ -188,6 +205,8 @@ fn cross_rig(a: &SkelAnimation, b: &SkelAnimation, sk: &Skeleton) -> CrossRig {
         hip_horizontal,
         stride_ratio,
         hip_fitted,
+        hip_level: (level, spread),
+        hip_shape,
         hip_mean: hip_mean(lag),
         hip_max,
         angles,
@@ -233,6 +252,12 @@ fn a_character_creator_take_retargets_like_the_same_cmu_take() {
         r.stride_ratio,
         r.hip_fitted * 1e3
     );
+    eprintln!(
+        "hip height: the CMU take's {:.1} mm above the CC take's (spread {:.1} mm); with the stride scale fitted and that height removed: {:.1} mm mean",
+        r.hip_level.0 * 1e3,
+        r.hip_level.1 * 1e3,
+        r.hip_shape * 1e3
+    );
     // Retargeting adds at most half a degree to what the exports already disagree by (the
     // CC export bends the knees ~5° more than the CMU one), and stays within 5° elsewhere.
     // The sources' own figure is read by the same BVH code, so a break there moves both: it
@@ -244,8 +269,9 @@ fn a_character_creator_take_retargets_like_the_same_cmu_take() {
             "{name}: {deg:.2}° apart on average (the sources: {src:.2}°)"
         );
     }
-    // The path: 89.5 mm apart as scaled by leg length, because the iClone export travels 6 %
-    // further per leg length; with that ratio fitted, the shapes agree (measured 13.3 mm).
+    // The path: 92.9 mm apart as scaled by leg length: the iClone export travels 4.5 % further
+    // per leg length and carries its hips 66 mm lower (its knees bend more); with the
+    // stride fitted (4.5 %) and the height removed, they are still 43 mm apart.
     assert!(
         r.hip_mean < 0.15,
         "hip path {:.1} mm apart",
