@@ -559,4 +559,3 @@ fn bad_production_maps_are_one_error_line_and_write_nothing() {
     let line = one_error_line(&run, &out);
     assert!(line.contains("no recognisable legs"), "{line}");
 }
-
