@@ -369,7 +369,14 @@ const fn cubic_slots() -> [[[usize; 3]; 3]; 3] {
     while i < CUBIC.len() {
         let [a, b, c] = CUBIC[i];
         // Every ordering of (a, b, c).
-        let orders = [[a, b, c], [a, c, b], [b, a, c], [b, c, a], [c, a, b], [c, b, a]];
+        let orders = [
+            [a, b, c],
+            [a, c, b],
+            [b, a, c],
+            [b, c, a],
+            [c, a, b],
+            [c, b, a],
+        ];
         let mut o = 0;
         while o < orders.len() {
             let [j, k, l] = orders[o];
