@@ -20,6 +20,7 @@ pub struct Body {
 }
 
 impl Body {
+    /// A body from its parts (the readers' one constructor: the patch cache starts empty).
     pub fn new(
         name: String,
         mesh: TriMesh,
