@@ -10,11 +10,9 @@
 //! do not add this way, and a run against the mean of two others is not comparable with a model
 //! against one run (E|X − mean₂|² = 1.5σ²): every figure here is of one cache against one run.
 
+use super::Frames;
 use serde::Serialize;
 use std::ops::Range;
-
-/// Per frame, per vertex.
-pub type Frames = [Vec<[f32; 3]>];
 
 /// A figure over the first 50 predicted frames and over the whole clip (frame 0, the start, left
 /// out as in reference_error.rs).

@@ -4,10 +4,8 @@
 //! simulations are: a loose garment is chaotic, so the simulator itself defines it only to that
 //! spread, and a model as far from them as they are from each other is as good as a re-run.
 
+use super::Frames;
 use serde::{Deserialize, Serialize};
-
-/// Frames per clip: per frame, per vertex.
-pub type Frames = [Vec<[f32; 3]>];
 
 /// The error of played frames against a reference: mean vertex L2 distance, over spans of the
 /// played frames (frame 0 the start).
