@@ -50,7 +50,11 @@ fn write_body(body: &Body, path: &Path) -> Result<()> {
     let asset = exporters::BakedAsset {
         skeleton: skeleton_asset(&body.skeleton),
         meshes: vec![skinned_mesh_asset(
-            "body", &body.mesh, None, &body.skin, BODY_COLOR,
+            "body",
+            &body.mesh(),
+            None,
+            &body.skin,
+            BODY_COLOR,
         )],
         animations: vec![],
         provenance: vec![(
@@ -63,7 +67,7 @@ fn write_body(body: &Body, path: &Path) -> Result<()> {
         "{}: {} vertices, {} triangles, {} joints",
         path.display(),
         asset.meshes[0].points.len(),
-        body.mesh.triangle_count(),
+        body.mesh().triangle_count(),
         body.skeleton.joint_count()
     );
     Ok(())
@@ -71,8 +75,8 @@ fn write_body(body: &Body, path: &Path) -> Result<()> {
 
 fn report(g: &Garment, body: &Body) {
     let topo = Topology::new(&g.mesh);
-    let inside =
-        count_inside(&g.mesh.positions, &body.mesh.positions, &body.normals).unwrap_or(usize::MAX);
+    let inside = count_inside(&g.mesh.positions, &body.mesh().positions, &body.normals)
+        .unwrap_or(usize::MAX);
     println!(
         "{}: {} vertices, {} triangles, boundary loops {:?}, {} pinned, {} inside the body",
         g.name,
@@ -91,7 +95,7 @@ fn report(g: &Garment, body: &Body) {
 fn skirt(mh: &MakeHuman, body: &Body) -> Result<Garment> {
     let (mesh, _) = mh.group_mesh("helper-skirt")?;
     let mut mesh = mesh.subdivide_midpoint();
-    let was_inside = push_out(&mut mesh, &body.mesh.positions, &body.normals, FIT_MARGIN)?;
+    let was_inside = push_out(&mut mesh, &body.mesh().positions, &body.normals, FIT_MARGIN)?;
     println!("skirt: {was_inside} vertices were inside the body before fitting");
     let top = mesh
         .positions
@@ -145,7 +149,7 @@ fn top(mh: &MakeHuman, body: &Body) -> Result<Garment> {
     };
     let (cut, _) = tights.submesh(|v| keep(tights.positions[v as usize]));
     let mut mesh = largest_component(&cut);
-    let was_inside = push_out(&mut mesh, &body.mesh.positions, &body.normals, FIT_MARGIN)?;
+    let was_inside = push_out(&mut mesh, &body.mesh().positions, &body.normals, FIT_MARGIN)?;
     println!("top: {was_inside} vertices were inside the body before fitting");
     let sidecar = GarmentSidecar {
         pinned: vec![],
@@ -172,7 +176,7 @@ fn shirt(usd: &Path, body: &Body) -> Result<Garment> {
     let mut mesh = Garment::read(usd)?
         .mesh
         .transformed(|p| std::array::from_fn(|k| p[k] + SHIRT_OFFSET[k]));
-    let was_inside = push_out(&mut mesh, &body.mesh.positions, &body.normals, FIT_MARGIN)?;
+    let was_inside = push_out(&mut mesh, &body.mesh().positions, &body.normals, FIT_MARGIN)?;
     println!("shirt: {was_inside} vertices were inside the body before fitting");
     Ok(Garment {
         name: "shirt".into(),

@@ -10,7 +10,8 @@ use std::sync::OnceLock;
 #[derive(Clone, Debug)]
 pub struct Body {
     pub name: String,
-    pub mesh: TriMesh,
+    /// Private: the patch cache below is built from it, so it must not change after [`Body::new`].
+    mesh: TriMesh,
     pub normals: Vec<[f32; 3]>,
     pub skeleton: Skeleton,
     pub skin: Skin,
@@ -36,6 +37,11 @@ impl Body {
             skin,
             patches: OnceLock::new(),
         }
+    }
+
+    /// The rest mesh (metres, bind pose).
+    pub fn mesh(&self) -> &TriMesh {
+        &self.mesh
     }
 
     fn rest_patches(&self) -> &RestPatches {

@@ -72,7 +72,7 @@ pub fn compare_frames(
         .enumerate()
         .map(|(f, pose)| {
             let posed = PosedBody::new(body, pose);
-            let surface = SurfaceIndex::new(&posed.points, &body.mesh.triangles);
+            let surface = SurfaceIndex::new(&posed.points, &body.mesh().triangles);
             FrameComparison {
                 inside: series
                     .iter()

@@ -79,7 +79,7 @@ impl Garment {
         let mesh = &self.mesh;
         let n = mesh.vertex_count();
         let mut problems = Vec::new();
-        let inside = count_inside(&mesh.positions, &body.mesh.positions, &body.normals)?;
+        let inside = count_inside(&mesh.positions, &body.mesh().positions, &body.normals)?;
         if inside * 20 > n {
             problems.push(format!(
                 "{inside} of {n} vertices ({:.1} %) are inside the body at rest (more than 5 %): fit the garment first (push it out of the body)",

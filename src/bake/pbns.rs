@@ -223,7 +223,7 @@ pub fn bake(
         let body = &model.body;
         asset.meshes.push(skinned_mesh_asset(
             "body",
-            &body.mesh,
+            &body.mesh(),
             Some(&body.normals),
             &body.skin,
             BODY_COLOR,

@@ -92,9 +92,9 @@ impl Edges {
 /// Body edges whose both ends lie within `reach` of the garment at rest: the skin under it.
 pub fn body_edges_under(body: &Body, garment_rest: &[[f32; 3]], reach: f32) -> Edges {
     let index = PointIndex::new(garment_rest).expect("garment is finite and non-empty");
-    let p = &body.mesh.positions;
+    let p = &body.mesh().positions;
     let near: Vec<bool> = p.par_iter().map(|&v| index.nearest(v).1 < reach).collect();
-    let pairs = Topology::new(&body.mesh)
+    let pairs = Topology::new(&body.mesh())
         .edges
         .into_iter()
         .filter(|e| e.iter().all(|&v| near[v as usize]))

@@ -312,8 +312,8 @@ impl BodyInfo {
     pub fn of(body: &Body) -> BodyInfo {
         BodyInfo {
             name: body.name.clone(),
-            vertices: body.mesh.vertex_count(),
-            rest_hash: points_hash(&body.mesh.positions),
+            vertices: body.mesh().vertex_count(),
+            rest_hash: points_hash(&body.mesh().positions),
         }
     }
 }
@@ -512,9 +512,9 @@ pub fn to_bytes(file: &ModelFile) -> Result<Vec<u8>> {
         Blob::floats(&file.lbs.joint_weights, k),
     ));
     let b = &file.body;
-    blobs.push(("body.points".into(), Blob::points(&b.mesh.positions)));
+    blobs.push(("body.points".into(), Blob::points(&b.mesh().positions)));
     blobs.push(("body.normals".into(), Blob::points(&b.normals)));
-    let tri: Vec<u32> = b.mesh.triangles.iter().flatten().copied().collect();
+    let tri: Vec<u32> = b.mesh().triangles.iter().flatten().copied().collect();
     blobs.push(("body.triangles".into(), Blob::ints(&tri, 3)));
     blobs.push((
         "body.joints".into(),
@@ -745,7 +745,7 @@ pub fn load(path: &Path, device: Device) -> Result<ModelFile> {
     garment
         .validate()
         .map_err(|e| tensors.fail(format!("garment: {e}")))?;
-    body.mesh
+    body.mesh()
         .validate()
         .map_err(|e| tensors.fail(format!("body: {e}")))?;
     let (model, known): (Model, fn(&str) -> bool) = match &info.model {

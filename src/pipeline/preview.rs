@@ -122,7 +122,7 @@ pub fn sheet(args: &Request) -> Result<(image::RgbImage, usize)> {
     let mut shots = Vec::new();
     for (label, pose, frame) in &poses {
         let skinning = body.skeleton.skinning_matrices(pose);
-        let body_points = body.skin.skin_points(&body.mesh.positions, &skinning);
+        let body_points = body.skin.skin_points(&body.mesh().positions, &skinning);
         let errors = |points: &[[f32; 3]]| {
             // Only garments of the reference's mesh are coloured.
             reference
@@ -206,7 +206,7 @@ pub fn sheet(args: &Request) -> Result<(image::RgbImage, usize)> {
     };
     Ok(shots_sheet(
         &shots,
-        &body.mesh.triangles,
+        &body.mesh().triangles,
         &triangles,
         &layout,
     ))

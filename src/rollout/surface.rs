@@ -18,7 +18,7 @@ pub struct PosedSurface<'a> {
 impl<'a> PosedSurface<'a> {
     pub fn new(body: &'a Body, pose: &[JointTransform]) -> Result<PosedSurface<'a>> {
         let skinning = body.skeleton.skinning_matrices(pose);
-        let points = body.skin.skin_points(&body.mesh.positions, &skinning);
+        let points = body.skin.skin_points(&body.mesh().positions, &skinning);
         let index = PointIndex::new(&points)?;
         Ok(PosedSurface {
             body,

@@ -98,7 +98,7 @@ pub fn prepare(scene: &Scene, settings: &Settings) -> Result<Prepared> {
             .collect()
     };
     Ok(Prepared {
-        body_frames: skinned(&scene.body.skin, &scene.body.mesh.positions),
+        body_frames: skinned(&scene.body.skin, &scene.body.mesh().positions),
         garment_targets: skinned(&skin, &scene.garment.mesh.positions),
         poses,
         lead_in,
@@ -109,7 +109,7 @@ pub fn prepare(scene: &Scene, settings: &Settings) -> Result<Prepared> {
 /// The nearest body vertex's weights (4 influences): the pinned vertices move rigidly with the
 /// skin vertex under them. Only pinned vertices read these targets after the first frame.
 fn garment_lbs(body: &Body, garment: &Garment) -> Result<Skin> {
-    let index = PointIndex::new(&body.mesh.positions)?;
+    let index = PointIndex::new(&body.mesh().positions)?;
     let (skin, _) = weights::garment_skin(
         &garment.mesh,
         &body.skin,

@@ -76,7 +76,7 @@ pub fn of(
         .map(|f| {
             let x = &frames[f];
             let posed = PosedBody::new(s.body, &poses[f]);
-            let surface = SurfaceIndex::new(&posed.points, &s.body.mesh.triangles);
+            let surface = SurfaceIndex::new(&posed.points, &s.body.mesh().triangles);
             let inside = InsideFrame::of(x, &posed, &surface);
             let before = if f == 0 {
                 previous

@@ -218,7 +218,7 @@ struct Sdf {
 
 impl Sdf {
     fn new(body: &Body, garment: &TriMesh, device: Device) -> Sdf {
-        let surface = SurfaceIndex::new(&body.mesh.positions, &body.mesh.triangles);
+        let surface = SurfaceIndex::new(&body.mesh().positions, &body.mesh().triangles);
         let (lo, hi) = bounds(&garment.positions);
         let grid = SdfGrid::new(&surface, lo, hi, SDF_PAD, SDF_SPACING);
         let [nx, ny, nz] = grid.dims.map(|d| d as i64);
@@ -336,7 +336,7 @@ impl SpaceTrainer {
             })
         }));
         let ops = MeshOps::new(&garment.mesh, device);
-        let index = crate::geometry::PointIndex::new(&body.mesh.positions)?;
+        let index = crate::geometry::PointIndex::new(&body.mesh().positions)?;
         let lbs = weights::smooth_garment_skin(
             &garment.mesh,
             &body.skin,

@@ -61,7 +61,7 @@ impl Correspondences {
     ) -> Correspondences {
         let rest: Vec<[f32; 3]> = subset
             .iter()
-            .map(|&v| body.mesh.positions[v as usize])
+            .map(|&v| body.mesh().positions[v as usize])
             .collect();
         let rest_n: Vec<[f32; 3]> = subset.iter().map(|&v| body.normals[v as usize]).collect();
         let skin = body.skin.subset(subset);
@@ -284,7 +284,7 @@ impl Correspondences {
 /// can be nearest to in a pose (the garment is skinned to the same bones).
 pub fn body_subset(body: &Body, garment: &[[f32; 3]], reach: f32) -> Vec<u32> {
     let index = PointIndex::new(garment).expect("garment is finite");
-    body.mesh
+    body.mesh()
         .positions
         .par_iter()
         .enumerate()

@@ -415,7 +415,7 @@ impl Trainer {
         } = inputs;
         let device = settings.device;
         let rest = &garment.mesh.positions;
-        let body_index = crate::geometry::PointIndex::new(&body.mesh.positions)?;
+        let body_index = crate::geometry::PointIndex::new(&body.mesh().positions)?;
         let (lbs, inpainted) = weights::garment_skin(
             &garment.mesh,
             &body.skin,
@@ -1328,7 +1328,7 @@ impl Trainer {
             },
             refresh_every: self.settings.refresh_every,
             body_subset: self.correspondences.subset_len(),
-            body_vertices: self.file.body.mesh.vertex_count(),
+            body_vertices: self.file.body.mesh().vertex_count(),
             split,
         })
     }

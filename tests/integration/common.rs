@@ -276,7 +276,7 @@ pub fn lowest_vertex(
     anim: &garmentbake::rig::SkelAnimation,
     joints: &[usize],
 ) -> Vec<f32> {
-    let region: Vec<u32> = (0..body.mesh.vertex_count() as u32)
+    let region: Vec<u32> = (0..body.mesh().vertex_count() as u32)
         .filter(|&v| {
             body.skin
                 .vertex(v as usize)
@@ -286,7 +286,7 @@ pub fn lowest_vertex(
         .collect();
     let pts: Vec<[f32; 3]> = region
         .iter()
-        .map(|&v| body.mesh.positions[v as usize])
+        .map(|&v| body.mesh().positions[v as usize])
         .collect();
     let sub = body.skin.subset(&region);
     (0..anim.frame_count())

@@ -95,9 +95,9 @@ fn inside_figures_of_points_in_a_cube() {
 #[test]
 fn the_sample_body_is_inside_behind_its_skin_and_outside_in_front() {
     let body = read_body(&sample("body.glb")).unwrap();
-    let surface = SurfaceIndex::new(&body.mesh.positions, &body.mesh.triangles);
+    let surface = SurfaceIndex::new(&body.mesh().positions, &body.mesh().triangles);
     let shifted = |d: f32| -> Vec<[f32; 3]> {
-        body.mesh
+        body.mesh()
             .positions
             .iter()
             .zip(&body.normals)
@@ -175,7 +175,7 @@ fn the_body_overlap_search_flags_what_its_definition_flags() {
     // Frame 92 has the clip's most overlapping vertices (2,272: the arms against the sides).
     for frame in [0, 92, 250] {
         let posed = PosedBody::new(&body, &clip.animation.local_pose(frame));
-        let expected = self_overlap_by_definition(&body.mesh.positions, &posed);
+        let expected = self_overlap_by_definition(&body.mesh().positions, &posed);
         let flagged = |o: &[bool]| o.iter().filter(|&&x| x).count();
         eprintln!(
             "frame {frame}: {} vertices flagged",

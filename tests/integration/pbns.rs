@@ -560,7 +560,7 @@ fn model_with_another_skeleton_is_a_clear_error() {
         skeleton: skeleton_asset(&other),
         meshes: vec![skinned_mesh_asset(
             "body",
-            &b.mesh,
+            &b.mesh(),
             Some(&b.normals),
             &b.skin,
             BODY_COLOR,
@@ -1032,7 +1032,7 @@ fn sample_garments_are_fitted_and_clean() {
         let g = Garment::read(&sample(&format!("garments/{name}.obj"))).unwrap();
         let inside = garmentbake::garment::count_inside(
             &g.mesh.positions,
-            &body.mesh.positions,
+            &body.mesh().positions,
             &body.normals,
         )
         .unwrap();

@@ -10,7 +10,7 @@ use garmentbake::rig::SkelAnimation;
 /// Our own LBS of the body at a clip frame (the reference the readers must reproduce).
 fn our_lbs(body: &Body, anim: &SkelAnimation, frame: usize) -> Vec<[f32; 3]> {
     let skinning = body.skeleton.skinning_matrices(&anim.local_pose(frame));
-    body.skin.skin_points(&body.mesh.positions, &skinning)
+    body.skin.skin_points(&body.mesh().positions, &skinning)
 }
 
 fn pose(clip: &str, dir: &std::path::Path) -> std::path::PathBuf {

@@ -124,31 +124,26 @@ fn cross_rig(a: &SkelAnimation, b: &SkelAnimation, sk: &Skeleton) -> CrossRig {
         bb += y.dot(&y);
     }
     let stride_ratio = ab / bb;
-    let fitted: Vec<f32> = p
-        .iter()
-        .map(|&(fa, fb)| {
-            let (x, y) = (pa[fa][hips] - ma, (pb[fb][hips] - mb) * stride_ratio);
-            let mut d = x - y;
-            d.y = pa[fa][hips].y - pb[fb][hips].y;
-            d.norm()
-        })
-        .collect();
-    let hip_fitted = fitted.iter().sum::<f32>() / fitted.len() as f32;
     let dy: Vec<f32> = p
         .iter()
         .map(|&(fa, fb)| pa[fa][hips].y - pb[fb][hips].y)
         .collect();
     let level = dy.iter().sum::<f32>() / dy.len() as f32;
     let spread = (dy.iter().map(|d| (d - level).powi(2)).sum::<f32>() / dy.len() as f32).sqrt();
-    let shape: Vec<f32> = p
-        .iter()
-        .map(|&(fa, fb)| {
-            let mut d = (pa[fa][hips] - ma) - (pb[fb][hips] - mb) * stride_ratio;
-            d.y = pa[fa][hips].y - pb[fb][hips].y - level;
-            d.norm()
-        })
-        .collect();
-    let hip_shape = shape.iter().sum::<f32>() / shape.len() as f32;
+    // Mean hip distance with b's horizontal path scaled by the fitted stride and `height`
+    // taken off a's hip height above b's.
+    let scaled_path = |height: f32| -> f32 {
+        p.iter()
+            .map(|&(fa, fb)| {
+                let mut d = (pa[fa][hips] - ma) - (pb[fb][hips] - mb) * stride_ratio;
+                d.y = pa[fa][hips].y - pb[fb][hips].y - height;
+                d.norm()
+            })
+            .sum::<f32>()
+            / p.len() as f32
+    };
+    let hip_fitted = scaled_path(0.0);
+    let hip_shape = scaled_path(level);
     type Angle = (
         &'static str,
         (&'static str, &'static str),

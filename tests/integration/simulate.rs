@@ -97,7 +97,7 @@ fn a_waist_band_on_a_walking_body_stays_outside_and_pins_follow_within_a_millime
     )
     .unwrap();
     let pins = &garment.sidecar.pinned;
-    let rest_index = garmentbake::geometry::PointIndex::new(&body.mesh.positions).unwrap();
+    let rest_index = garmentbake::geometry::PointIndex::new(&body.mesh().positions).unwrap();
     let under: Vec<usize> = pins
         .iter()
         .map(|&v| rest_index.nearest(garment.mesh.positions[v as usize]).0 as usize)
@@ -106,7 +106,7 @@ fn a_waist_band_on_a_walking_body_stays_outside_and_pins_follow_within_a_millime
     for (f, x) in frames.iter().enumerate() {
         let pose = clip.animation.local_pose(f);
         let posed = PosedBody::new(&body, &pose);
-        let surface = SurfaceIndex::new(&posed.points, &body.mesh.triangles);
+        let surface = SurfaceIndex::new(&posed.points, &body.mesh().triangles);
         let deep: Vec<(usize, f32)> = x
             .iter()
             .enumerate()

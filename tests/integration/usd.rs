@@ -157,7 +157,8 @@ fn pose_usdc_validates_and_usdskel_replays_our_lbs_at_every_frame() {
     let reference = dir.join("walk.f32");
     write_reference(
         &reference,
-        (0..walk.frame_count()).map(|f| our_lbs(&body, &body.skin, &body.mesh.positions, &walk, f)),
+        (0..walk.frame_count())
+            .map(|f| our_lbs(&body, &body.skin, &body.mesh().positions, &walk, f)),
     );
     assert_replay(
         &file,
@@ -172,7 +173,7 @@ fn pose_usdc_validates_and_usdskel_replays_our_lbs_at_every_frame() {
         &reference,
         (0..long.frame_count())
             .step_by(8)
-            .map(|f| our_lbs(&body, &body.skin, &body.mesh.positions, &long, f)),
+            .map(|f| our_lbs(&body, &body.skin, &body.mesh().positions, &long, f)),
     );
     assert_replay(
         &file,
@@ -230,7 +231,7 @@ fn skirt_asset(frames: usize, shapes: usize, fps: f32) -> SkirtAsset {
     let body = read_body(&sample("body.glb")).unwrap();
     let skirt = Garment::read(&sample("garments/skirt.obj")).unwrap();
     // Skin: the joints of the 3 nearest body vertices, top 6 — a realistic many-influence skin.
-    let index = PointIndex::new(&body.mesh.positions).unwrap();
+    let index = PointIndex::new(&body.mesh().positions).unwrap();
     let per_vertex: Vec<Vec<(u16, f32)>> = skirt
         .mesh
         .positions
@@ -310,7 +311,7 @@ fn skirt_asset(frames: usize, shapes: usize, fps: f32) -> SkirtAsset {
     }
     let body_mesh = skinned_mesh_asset(
         &body.name,
-        &body.mesh,
+        &body.mesh(),
         Some(&body.normals),
         &body.skin,
         BODY_COLOR,
@@ -439,7 +440,7 @@ fn blend_shapes_and_six_influences_replay_through_usdskel() {
             our_lbs(
                 &s.body,
                 &s.body.skin,
-                &s.body.mesh.positions,
+                &s.body.mesh().positions,
                 &s.clips[0],
                 f,
             )
@@ -449,7 +450,7 @@ fn blend_shapes_and_six_influences_replay_through_usdskel() {
 }
 
 fn cache_of(body: &Body, anim: &SkelAnimation, frames: usize) -> asset::PointCache {
-    let mesh = skinned_mesh_asset("body", &body.mesh, None, &body.skin, BODY_COLOR);
+    let mesh = skinned_mesh_asset("body", &body.mesh(), None, &body.skin, BODY_COLOR);
     asset::PointCache {
         name: "body cache".into(),
         fps: anim.fps,
@@ -459,9 +460,9 @@ fn cache_of(body: &Body, anim: &SkelAnimation, frames: usize) -> asset::PointCac
             triangles: mesh.triangles.clone(),
         }),
         triangles: mesh.triangles,
-        point_count: body.mesh.vertex_count(),
+        point_count: body.mesh().vertex_count(),
         points: (0..frames)
-            .flat_map(|f| our_lbs(body, &body.skin, &body.mesh.positions, anim, f))
+            .flat_map(|f| our_lbs(body, &body.skin, &body.mesh().positions, anim, f))
             .collect(),
     }
 }
@@ -720,7 +721,7 @@ fn slow_blender_imports_the_usdc_with_armature_shape_keys_and_animation() {
         let ours = our_lbs(
             &s.body,
             &s.body.skin,
-            &s.body.mesh.positions,
+            &s.body.mesh().positions,
             &s.clips[0],
             f,
         );

@@ -58,13 +58,13 @@ impl BodyAnchors {
         reach: f32,
     ) -> Result<BodyAnchors> {
         let index = PointIndex::new(garment)?;
-        let near: Vec<u32> = (0..body.mesh.vertex_count() as u32)
-            .filter(|&v| index.nearest(body.mesh.positions[v as usize]).1 <= reach)
+        let near: Vec<u32> = (0..body.mesh().vertex_count() as u32)
+            .filter(|&v| index.nearest(body.mesh().positions[v as usize]).1 <= reach)
             .collect();
         if near.len() < count {
             bail!("only {} body vertices lie within {reach} m of the garment, {count} seeds asked for", near.len());
         }
-        let p = |v: u32| nalgebra::Vector3::from(body.mesh.positions[v as usize]);
+        let p = |v: u32| nalgebra::Vector3::from(body.mesh().positions[v as usize]);
         let n = garment.len() as f32;
         let centroid = garment.iter().fold(nalgebra::Vector3::zeros(), |a, g| {
             a + nalgebra::Vector3::from(*g) / n
@@ -105,7 +105,7 @@ impl BodyAnchors {
         Ok(BodyAnchors {
             rest: chosen
                 .iter()
-                .map(|&v| body.mesh.positions[v as usize])
+                .map(|&v| body.mesh().positions[v as usize])
                 .collect(),
             vertices: chosen,
             parts,
@@ -116,7 +116,7 @@ impl BodyAnchors {
     pub fn from_vertices(body: &Body, vertices: &[u32], parts: &[usize]) -> Result<BodyAnchors> {
         let rest = vertices
             .iter()
-            .map(|&v| body.mesh.positions.get(v as usize).copied())
+            .map(|&v| body.mesh().positions.get(v as usize).copied())
             .collect::<Option<Vec<_>>>();
         match rest {
             Some(rest)
@@ -130,7 +130,7 @@ impl BodyAnchors {
             }
             _ => bail!(
                 "seed vertices or parts do not fit the body ({} vertices)",
-                body.mesh.vertex_count()
+                body.mesh().vertex_count()
             ),
         }
     }

@@ -164,7 +164,7 @@ pub fn run(request: &Request, outputs: OutputSet, feedback: &Feedback) -> Result
     );
     let body = &file.body;
     let bodies = (r.body_out.is_some() || r.with_body)
-        .then(|| lbs_frames(&body.skin, &body.mesh.positions, skeleton, &poses));
+        .then(|| lbs_frames(&body.skin, &body.mesh().positions, skeleton, &poses));
     let baked = outputs.write(&r.out, |out| match (kind, &bodies) {
         (Some(FileKind::Gltf), _) => {
             write_gltf(r, out, &file, &poses, &rollout.frames, fps, feedback.say).map(Some)
@@ -172,7 +172,7 @@ pub fn run(request: &Request, outputs: OutputSet, feedback: &Feedback) -> Result
         (_, Some(b)) if r.with_body => {
             let meshes = [
                 ("garment", &file.garment, rollout.frames.as_slice()),
-                ("body", &body.mesh, b.as_slice()),
+                ("body", &body.mesh(), b.as_slice()),
             ];
             write_caches_in(out, &meshes, fps, r.space).map(|()| None)
         }
@@ -191,7 +191,7 @@ pub fn run(request: &Request, outputs: OutputSet, feedback: &Feedback) -> Result
         })?;
     }
     if let (Some(path), Some(b)) = (&r.body_out, &bodies) {
-        outputs.write(path, |p| write_cache_in(p, &body.mesh, b, fps, r.space))?;
+        outputs.write(path, |p| write_cache_in(p, &body.mesh(), b, fps, r.space))?;
     }
     let view = match &r.view {
         Some(page) => {
@@ -289,7 +289,7 @@ fn errors_against_references(
 /// The fixed skin of the model's garment: the LBS baseline and the glTF's skin.
 fn garment_skin(file: &ModelFile) -> Result<crate::rig::Skin> {
     let body = &file.body;
-    let index = PointIndex::new(&body.mesh.positions)?;
+    let index = PointIndex::new(&body.mesh().positions)?;
     Ok(smooth_garment_skin(
         &file.garment,
         &body.skin,
