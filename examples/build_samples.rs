@@ -51,7 +51,7 @@ fn write_body(body: &Body, path: &Path) -> Result<()> {
         skeleton: skeleton_asset(&body.skeleton),
         meshes: vec![skinned_mesh_asset(
             "body",
-            &body.mesh(),
+            body.mesh(),
             None,
             &body.skin,
             BODY_COLOR,

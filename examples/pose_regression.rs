@@ -17,7 +17,7 @@ use garmentbake::models::dynamic::motion::body_drive;
 use garmentbake::models::dynamic::settle::PoseRegression;
 use garmentbake::models::dynamic::{BodyAnchors, Dynamic, MotionShape};
 use garmentbake::models::file::{self, ModelFile};
-use garmentbake::train::dynamic::{FrameData, Reconstruction, Sequence};
+use garmentbake::train::dynamic::{deviation, FrameData, Sequence};
 use garmentbake::train::motion::{drive_joints, history_indices};
 use std::path::Path;
 use tch::{Device, Kind, Tensor};
@@ -217,8 +217,8 @@ impl Report {
             .iter()
             .map(|t| {
                 let t = t.narrow(0, 1, n);
-                let whole = Reconstruction::of(&pred, &t).mean_mm;
-                let first = Reconstruction::of(
+                let whole = deviation(&pred, &t).mean_mm;
+                let first = deviation(
                     &pred.narrow(0, 0, FIRST.min(n)),
                     &t.narrow(0, 0, FIRST.min(n)),
                 )

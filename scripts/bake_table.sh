@@ -17,7 +17,7 @@ for inf in 4 8; do
     ms=$(( ($(date +%s%N) - start) / 1000000 ))
     echo "$json" | python3 -c "
 import json,sys
-r=json.load(sys.stdin); c=r['report']['clips'][0]; p=c['pruning_error_m']
-print('| %s (%d) | %d | %.3f | %.4f | %s | %.2f | %.2f |' % ('$k', r['report']['targets'], r['report']['influences'], c['max_error_m']*1e3, c['mean_error_m']*1e3, '%.1f' % (p*1e3) if p is not None else '-', r['bytes']/1e6, $ms/1000.0))"
+r=json.load(sys.stdin); c=r['report']['clips'][0]; p=c['pruning_error_mm']
+print('| %s (%d) | %d | %.3f | %.4f | %s | %.2f | %.2f |' % ('$k', r['report']['targets'], r['report']['influences'], c['max_mm'], c['mean_mm'], '%.1f' % p if p is not None else '-', r['bytes']/1e6, $ms/1000.0))"
   done
 done

@@ -9,6 +9,7 @@ use super::compress::{
 use super::normals;
 use super::replay::{distances, Played};
 use super::{animation_asset, moved_by, skeleton_asset, skinned_mesh_asset, BODY_COLOR};
+use crate::metrics::deviation::Deviation;
 use crate::models::file::ModelFile;
 use crate::models::pbns::flat;
 use crate::models::pose_features::PoseBatch;
@@ -48,12 +49,12 @@ pub struct BakeReport {
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct ClipError {
     pub clip: String,
-    pub frames: usize,
-    pub max_error_m: f32,
-    pub mean_error_m: f32,
+    /// The file's replay against the network.
+    #[serde(flatten)]
+    pub error: Deviation,
     /// With fewer influences than the network: the max error pruning alone would cost (before
-    /// the corrective blend shapes compensate it).
-    pub pruning_error_m: Option<f32>,
+    /// the corrective blend shapes compensate it), mm.
+    pub pruning_error_mm: Option<f64>,
 }
 
 /// A clip as the network sees it: its pose batch (features and skinning matrices, built once)
@@ -223,7 +224,7 @@ pub fn bake(
         let body = &model.body;
         asset.meshes.push(skinned_mesh_asset(
             "body",
-            &body.mesh(),
+            body.mesh(),
             Some(&body.normals),
             &body.skin,
             BODY_COLOR,
@@ -300,8 +301,11 @@ pub fn bake(
                 weights: &network_x,
                 ..uncorrected
             };
-            error.pruning_error_m =
-                Some(clip_error(clip, &distances(&uncorrected, &played_by_network)).max_error_m);
+            error.pruning_error_mm = Some(
+                clip_error(clip, &distances(&uncorrected, &played_by_network))
+                    .error
+                    .max_mm,
+            );
         }
         report.clips.push(error);
         clock.lap("replay");
@@ -420,13 +424,15 @@ fn rig_skinning_rows(skeleton: &Skeleton, clip: &SkelAnimation) -> Vec<f32> {
     frames.concat()
 }
 
-/// A clip's replay error from its per-frame largest and mean distances.
+/// A clip's replay error from its per-frame largest and mean distances (m).
 fn clip_error(clip: &SkelAnimation, per_frame: &[(f32, f32)]) -> ClipError {
+    let mm: Vec<(f64, f64)> = per_frame
+        .iter()
+        .map(|&(max, mean)| (1e3 * max as f64, 1e3 * mean as f64))
+        .collect();
     ClipError {
         clip: clip.name.clone(),
-        frames: clip.frame_count(),
-        max_error_m: per_frame.iter().map(|e| e.0).fold(0.0, f32::max),
-        mean_error_m: per_frame.iter().map(|e| e.1).sum::<f32>() / per_frame.len().max(1) as f32,
-        pruning_error_m: None,
+        error: Deviation::of_largest_and_mean(&mm),
+        pruning_error_mm: None,
     }
 }

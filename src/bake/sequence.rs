@@ -11,28 +11,29 @@ use super::normals;
 use super::pbns::GARMENT_COLOR;
 use super::{animation_asset, moved_by, skeleton_asset, skinned_mesh_asset};
 use crate::geometry::TriMesh;
+use crate::metrics::deviation::Deviation;
 use crate::rig::{SkelAnimation, Skeleton, Skin};
 use anyhow::{bail, Result};
 use exporters::asset::{BakedAsset, BlendShape};
 use nalgebra::{DMatrix, Matrix4, Point3};
 use rayon::prelude::*;
 
-/// What the compression kept and what it cost, in metres (world space, after skinning).
+/// What the compression kept and what it cost (world space, after skinning).
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct SequenceReport {
-    pub frames: usize,
     pub targets: usize,
     /// Singular directions of the residuals above 1e-12 of the energy of the largest.
     pub rank: usize,
-    pub max_error_m: f32,
-    pub mean_error_m: f32,
+    /// The file's frames against the frames baked.
+    #[serde(flatten)]
+    pub error: Deviation,
     /// The largest animated weight (the smallest is 0): a target's largest displacement in
     /// metres, so under 1 for a garment, inside the range every reader keeps.
     pub max_weight: f32,
     /// The targets are 16-bit (KHR_mesh_quantization).
     pub quantized: bool,
     /// The count asked for (`--max-targets`), when a count and not a tolerance chose the
-    /// targets: `max_error_m` is then what the budget costs.
+    /// targets: `error` is then what the budget costs.
     #[serde(default)]
     pub max_targets: Option<usize>,
 }
@@ -61,7 +62,7 @@ pub fn bake_sequence(
     // Weights from 0 up (the base mesh takes the rest): readers that clamp them play it too.
     let FromZero { base, rest_weights } = kept.weights_from_zero();
     let base = moved_by(garment, &base);
-    let (max_error_m, mean_error_m) = world_error(
+    let error = world_error(
         &base.positions,
         &blended,
         frames,
@@ -102,11 +103,9 @@ pub fn bake_sequence(
         ..Default::default()
     };
     let report = SequenceReport {
-        frames: frames.len(),
         targets: kept.targets.len(),
         rank: spectrum.rank(),
-        max_error_m,
-        mean_error_m,
+        error,
         max_weight: kept.weights.iter().flatten().fold(0.0, |m, &w| m.max(w)),
         quantized: quantize,
         max_targets: match budget {
@@ -189,15 +188,15 @@ fn rest_residuals(
     ))
 }
 
-/// Max and mean distance between the baked replay (`LBS(rest + Σ w_k T_k)`) and the frames.
+/// Distance between the baked replay (`LBS(rest + Σ w_k T_k)`) and the frames, per frame.
 fn world_error(
     rest: &[[f32; 3]],
     blended: &[Vec<Matrix4<f32>>],
     frames: &[Vec<[f32; 3]>],
     targets: &[Vec<[f32; 3]>],
     weights: &[Vec<f32>],
-) -> (f32, f32) {
-    let per_frame: Vec<(f32, f64)> = frames
+) -> Deviation {
+    let per_frame: Vec<(f64, f64)> = frames
         .par_iter()
         .zip(blended)
         .zip(weights)
@@ -212,13 +211,10 @@ fn world_error(
                 max = max.max(e);
                 sum += e as f64;
             }
-            (max, sum)
+            (1e3 * max as f64, 1e3 * sum / rest.len().max(1) as f64)
         })
         .collect();
-    let count = (frames.len() * rest.len()).max(1) as f64;
-    let max = per_frame.iter().map(|x| x.0).fold(0.0, f32::max);
-    let mean = per_frame.iter().map(|x| x.1).sum::<f64>() / count;
-    (max, mean as f32)
+    Deviation::of_largest_and_mean(&per_frame)
 }
 
 #[cfg(test)]
@@ -279,7 +275,7 @@ mod tests {
             // Un-skinned, the residuals span the two modes only (left in world space, the
             // skinning's rotations would need targets of their own); on the 16-bit grid too.
             assert_eq!(report.targets, 2, "{report:?}");
-            assert!(report.max_error_m < 1e-5, "{report:?}");
+            assert!(report.error.max_mm < 1e-2, "{report:?}");
             assert_eq!(asset.meshes[0].blend_shapes.len(), 2);
             assert_eq!(asset.meshes[0].quantized_blend_shapes, quantize);
             assert_eq!(
@@ -302,7 +298,7 @@ mod tests {
         assert_eq!((one.targets, one.max_targets), (1, Some(1)), "{one:?}");
         assert_eq!(asset.meshes[0].blend_shapes.len(), 1);
         assert!(
-            one.max_error_m > 1e-4,
+            one.error.max_mm > 0.1,
             "one target cannot carry two modes: {one:?}"
         );
         let wrong = &frames[..frames_n - 1];

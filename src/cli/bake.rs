@@ -205,15 +205,12 @@ impl Execute for Args {
             b.targets, b.used_rank, b.influences
         );
         for c in &b.clips {
-            if let Some(p) = c.pruning_error_m {
-                println!("{}: pruning the skin to {} influences alone would cost {:.3} mm; corrective blend shapes compensate", c.clip, b.influences, p * 1e3);
+            if let Some(p) = c.pruning_error_mm {
+                println!("{}: pruning the skin to {} influences alone would cost {:.3} mm; corrective blend shapes compensate", c.clip, b.influences, p);
             }
             println!(
                 "{}: {} frames, replay error vs network: max {:.3} mm, mean {:.4} mm",
-                c.clip,
-                c.frames,
-                c.max_error_m * 1e3,
-                c.mean_error_m * 1e3
+                c.clip, c.error.frames, c.error.max_mm, c.error.mean_mm
             );
         }
         for c in &r.coverage {

@@ -203,13 +203,13 @@ pub fn figures(kind: &str, report: &[u8]) -> Result<std::collections::BTreeMap<S
             let r: bake::Report = read(report)?;
             let first = r.report.clips.first();
             vec![
-                ("replay_mm", first.map(|c| 1e3 * c.max_error_m as f64)),
+                ("replay_mm", first.map(|c| c.error.max_mm)),
                 ("targets", Some(r.report.targets as f64)),
             ]
         }
         "validate" => {
             let r: validate::Report = read(report)?;
-            vec![("replay_mm", r.replay.map(|e| e.max_mm))]
+            vec![("replay_mm", r.replay.map(|e| e.error.max_mm))]
         }
         "simulate" => {
             let r: simulate::Report = read(report)?;

@@ -62,7 +62,7 @@ impl Execute for Args {
             skeleton: skeleton_asset(&body.skeleton),
             meshes: vec![skinned_mesh_asset(
                 &body.name,
-                &body.mesh(),
+                body.mesh(),
                 Some(&body.normals),
                 &body.skin,
                 BODY_COLOR,

@@ -170,7 +170,7 @@ impl Execute for Args {
             write_cache(p, &garment.mesh, &outcome.garment, fps)
         })?;
         if let Some(path) = &self.body_out {
-            outputs.write(path, |p| write_cache(p, &body.mesh(), &outcome.body, fps))?;
+            outputs.write(path, |p| write_cache(p, body.mesh(), &outcome.body, fps))?;
         }
         outputs.commit()?;
         let e = outcome.entry;

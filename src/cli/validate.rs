@@ -156,7 +156,7 @@ impl Execute for Args {
         if let Some(x) = &r.replay {
             println!(
                 "replay on {} ({} frames, {} vertices): max {:.4} mm (frame {}, vertex {}), mean {:.4} mm, p99 {:.4} mm; tolerance {} mm",
-                x.clip, x.frames, x.vertices, x.max_mm, x.worst_frame, x.worst_vertex, x.mean_mm, x.p99_mm, x.tolerance_mm
+                x.clip, x.error.frames, x.vertices, x.error.max_mm, x.error.worst_frame, x.worst_vertex, x.error.mean_mm, x.error.p99_mm.unwrap_or(f64::NAN), x.tolerance_mm
             );
         }
         for (severity, list) in [("error", &r.errors), ("warning", &r.warnings)] {

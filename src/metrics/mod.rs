@@ -1,6 +1,7 @@
 //! Garment metrics of posed frames against the posed body: edge error and strain, bending,
 //! collided vertices (split at body self-overlap), gravity energy. Plain arrays on the CPU,
 //! exact nearest neighbours: shared by training validation, `eval` and the exporters' checks.
+//! `deviation`: frames against a reference's, vertex by vertex (reconstructions, replays);
 //! `reference_error`: a played garment against simulated reference caches; `ensemble`, `hem`,
 //! `plausibility`: what `compare` measures of caches against perturbed simulations.
 
@@ -10,6 +11,7 @@ use crate::geometry::{face_normals, PointIndex, SurfaceIndex, Topology, TriMesh}
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+pub mod deviation;
 pub mod ensemble;
 pub mod hem;
 pub mod plausibility;
@@ -94,7 +96,7 @@ pub fn body_edges_under(body: &Body, garment_rest: &[[f32; 3]], reach: f32) -> E
     let index = PointIndex::new(garment_rest).expect("garment is finite and non-empty");
     let p = &body.mesh().positions;
     let near: Vec<bool> = p.par_iter().map(|&v| index.nearest(v).1 < reach).collect();
-    let pairs = Topology::new(&body.mesh())
+    let pairs = Topology::new(body.mesh())
         .edges
         .into_iter()
         .filter(|e| e.iter().all(|&v| near[v as usize]))

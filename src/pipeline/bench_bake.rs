@@ -91,7 +91,7 @@ pub fn run(request: &Request, say: &dyn Fn(&str)) -> Result<Report> {
     let _ = std::fs::remove_dir_all(&dir);
     let written = written?;
     Ok(Report {
-        frames: report.clips.iter().map(|c| c.frames).sum(),
+        frames: report.clips.iter().map(|c| c.error.frames).sum(),
         targets: report.targets,
         vertices: model.garment.vertex_count(),
         load_s,

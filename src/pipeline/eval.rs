@@ -178,7 +178,7 @@ pub fn run(request: &Request, outputs: OutputSet) -> Result<Report> {
     if let Some(path) = &r.body_out {
         let frames = lbs_frames(&body.skin, &body.mesh().positions, &body.skeleton, &poses);
         outputs.write(path, |p| {
-            write_cache_in(p, &body.mesh(), &frames, anim.fps, space)
+            write_cache_in(p, body.mesh(), &frames, anim.fps, space)
         })?;
     }
     let view = match &r.view {

@@ -8,12 +8,13 @@ use super::{Clips, Feedback};
 use crate::compute::Compute;
 use crate::garment::Garment;
 use crate::io::gltf_body::read_body;
+use crate::metrics::deviation::Deviation;
 use crate::models::dynamic::SpaceShape;
 use crate::models::dynamic::{BodyAnchors, MotionShape};
 use crate::models::file::{DynamicEpoch, ModelFile, MotionEpoch, RolloutRound, Settled};
 use crate::rig::Skeleton;
 use crate::rollout::{for_model, Init, Settings as RolloutSettings};
-use crate::train::dynamic::{FrameData, Reconstruction, Sequence, Settings, SpaceTrainer};
+use crate::train::dynamic::{deviation, FrameData, Sequence, Settings, SpaceTrainer};
 use crate::train::motion::{
     drive_joints, one_step, MotionTrainer, Rolled, Settings as MotionSettings,
 };
@@ -88,8 +89,8 @@ pub struct Report {
     /// Training frames processed per second of wall time.
     pub frames_per_second: f64,
     /// Space: reconstructions; dynamic: one-step predictions from simulated histories.
-    pub train: Reconstruction,
-    pub eval: Option<(String, Reconstruction)>,
+    pub train: Deviation,
+    pub eval: Option<(String, Deviation)>,
     /// Learnt kernel radius per body part (mm).
     pub radius_mm: Vec<(String, f64)>,
     pub last: Option<DynamicEpoch>,
@@ -98,7 +99,7 @@ pub struct Report {
     pub rollout_rounds: Vec<RolloutRound>,
     /// Stage dynamic: the held-out clip rolled out from its first simulated frame (each
     /// prediction the next history, no collision fix, latents held in the training range).
-    pub eval_rollout: Option<(String, Reconstruction)>,
+    pub eval_rollout: Option<(String, Deviation)>,
     /// Stage dynamic: how the model was settled towards the pose's garment; none: not settled.
     pub settle: Option<Settled>,
     /// Stage dynamic: the learnt dynamics' fit (`--dynamics-epochs`); none: the linear
@@ -126,8 +127,8 @@ impl Display for Report {
                 "one-step prediction from simulated history (vertex L2)"
             }
         )?;
-        let row = |f: &mut Formatter, name: &str, x: &Reconstruction| {
-            writeln!(f, "{name:<24} {:>6} frames   mean {:>6.2} mm   p99 {:>6.2} mm   max {:>6.2} mm (worst frame {})", x.frames, x.mean_mm, x.p99_mm, x.max_mm, x.worst_frame)
+        let row = |f: &mut Formatter, name: &str, x: &Deviation| {
+            writeln!(f, "{name:<24} {:>6} frames   mean {:>6.2} mm   p99 {:>6.2} mm   max {:>6.2} mm (worst frame {})", x.frames, x.mean_mm, x.p99_mm.unwrap_or(f64::NAN), x.max_mm, x.worst_frame)
         };
         row(f, "training frames", &r.train)?;
         if let Some((name, e)) = &r.eval {
@@ -436,7 +437,7 @@ impl Request {
                 // Frame 0 is the simulation's: the predicted frames follow.
                 let n = data.len() as i64 - 1;
                 let (rolled, truth) = (rolled.narrow(0, 1, n), data.garment.narrow(0, 1, n));
-                eval_rollout = Some((s.name.clone(), Reconstruction::of(&rolled, &truth)));
+                eval_rollout = Some((s.name.clone(), deviation(&rolled, &truth)));
                 let err = one_step_with_bar(dynamic, &data, fps, feedback.hide_bars)?;
                 Ok::<_, anyhow::Error>((s.name.clone(), err))
             })
@@ -625,7 +626,7 @@ fn one_step_with_bar(
     data: &FrameData,
     fps: f64,
     hide_bar: bool,
-) -> Result<Reconstruction> {
+) -> Result<Deviation> {
     let bar = crate::progress::bar(data.len() as u64, "one-step error", hide_bar);
     let err = one_step(dynamic, data, fps, &mut |done, total| {
         bar.set_length(total as u64);

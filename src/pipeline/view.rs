@@ -255,7 +255,7 @@ pub fn cache_scene(
             garment,
             skinned_mesh_asset(
                 "body",
-                &body.mesh(),
+                body.mesh(),
                 Some(&body.normals),
                 &body.skin,
                 BODY_COLOR,

@@ -109,7 +109,7 @@ pub fn job_files(scene: &Scene, prepared: &Prepared, settings: &Settings) -> Res
     let body = mesh_files(
         &mut files,
         Role::Body,
-        &scene.body.mesh(),
+        scene.body.mesh(),
         &prepared.body_frames,
         prepared.fps,
     )?;

@@ -13,6 +13,7 @@ use crate::fabric::Fabric;
 use crate::garment::Garment;
 use crate::geometry::sdf_grid::SdfGrid;
 use crate::geometry::{SurfaceIndex, TriMesh};
+use crate::metrics::deviation::Deviation;
 use crate::models::dynamic::space::Consts;
 use crate::models::dynamic::{
     anchors::PARTS, BodyAnchors, BodyFrames, Dynamic, MeshEdges, MeshLaplacian, Space, SpaceShape,
@@ -267,42 +268,19 @@ pub struct SpaceTrainer {
     sdf: std::cell::OnceCell<Sdf>,
 }
 
-/// Reconstruction error of frames (per-vertex L2 distance).
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Reconstruction {
-    pub frames: usize,
-    pub mean_mm: f64,
-    pub p99_mm: f64,
-    pub max_mm: f64,
-    pub worst_frame: usize,
-}
-
-impl Reconstruction {
-    /// Per-vertex L2 errors of predictions `[F, V, 3]` against the truth.
-    pub fn of(pred: &Tensor, truth: &Tensor) -> Reconstruction {
-        let d = (pred - truth)
-            .square()
-            .sum_dim_intlist(2, false, Kind::Float)
-            .sqrt();
-        let per_frame: Vec<f32> = d
-            .mean_dim(1, false, Kind::Float)
-            .try_into()
-            .unwrap_or_default();
-        let mut all: Vec<f32> = d.flatten(0, -1).try_into().unwrap_or_default();
-        all.sort_by(f32::total_cmp);
-        let worst_frame = per_frame
-            .iter()
-            .enumerate()
-            .max_by(|a, b| a.1.total_cmp(b.1))
-            .map_or(0, |(f, _)| f);
-        Reconstruction {
-            frames: per_frame.len(),
-            mean_mm: 1e3 * all.iter().map(|&x| x as f64).sum::<f64>() / all.len().max(1) as f64,
-            p99_mm: 1e3 * crate::metrics::percentile(&all, 0.99),
-            max_mm: 1e3 * all.last().copied().unwrap_or(0.0) as f64,
-            worst_frame,
-        }
-    }
+/// Per-vertex distances of predictions `[F, V, 3]` from the truth, in mm.
+pub fn deviation(pred: &Tensor, truth: &Tensor) -> Deviation {
+    let d = (pred - truth)
+        .square()
+        .sum_dim_intlist(2, false, Kind::Float)
+        .sqrt()
+        * 1e3;
+    let per_frame: Vec<Vec<f32>> = d.try_into().unwrap_or_default();
+    let per_frame: Vec<Vec<f64>> = per_frame
+        .into_iter()
+        .map(|f| f.into_iter().map(f64::from).collect())
+        .collect();
+    Deviation::of(&per_frame)
 }
 
 impl SpaceTrainer {
@@ -520,8 +498,8 @@ impl SpaceTrainer {
     }
 
     /// Per-vertex L2 error of the space's reconstructions of `data`.
-    pub fn measure(space: &Space, data: &FrameData) -> Reconstruction {
-        Reconstruction::of(&Self::reconstruct(space, data), &data.garment)
+    pub fn measure(space: &Space, data: &FrameData) -> Deviation {
+        deviation(&Self::reconstruct(space, data), &data.garment)
     }
 
     fn adam_params(&self) -> Vec<(String, Tensor)> {

@@ -6,8 +6,9 @@
 //! frames (teacher forcing). L1 terms are means (metres, latent units).
 
 use super::adam::Adam;
-use super::dynamic::{FrameData, Reconstruction};
+use super::dynamic::{deviation, FrameData};
 use super::{Blowup, Training};
+use crate::metrics::deviation::Deviation;
 use crate::models::dynamic::motion::{
     body_drive, motion_inputs, History, MotionInputs, StaticInputs,
 };
@@ -318,7 +319,7 @@ impl MotionTrainer {
             }
             let predicted = rolled.garments.index_select(0, &rolled.predicted);
             let truth = self.data.garment.index_select(0, &self.frames);
-            let error = Reconstruction::of(&predicted, &truth);
+            let error = deviation(&predicted, &truth);
             let space = &self.dynamic().space;
             let inputs = inputs_at(
                 space,
@@ -521,7 +522,7 @@ pub fn one_step(
     data: &FrameData,
     fps: f64,
     progress: &mut dyn FnMut(usize, usize),
-) -> Result<Reconstruction> {
+) -> Result<Deviation> {
     let encoder = dynamic.motion()?;
     let frames = predicted_frames(data);
     if dynamic.linear_only() {
@@ -542,7 +543,7 @@ pub fn one_step(
         skinned
     });
     let truth = data.garment.index_select(0, &idx_all);
-    Ok(Reconstruction::of(&pred, &truth))
+    Ok(deviation(&pred, &truth))
 }
 
 impl Training for MotionTrainer {

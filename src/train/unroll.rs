@@ -14,9 +14,10 @@
 //! rounds of `train::motion` refit `W` the same way, in closed form).
 
 use super::adam::Adam;
-use super::dynamic::{FrameData, Reconstruction};
+use super::dynamic::{deviation, FrameData};
 use super::motion::history_indices;
 use crate::geometry::strain_limit::StrainLimit;
+use crate::metrics::deviation::Deviation;
 use crate::models::dynamic::learned::{
     DynamicsEpoch, DynamicsFit, DynamicsSettings, LearnedDynamics,
 };
@@ -297,7 +298,7 @@ pub fn one_step_linear(
     fps: f64,
     frames: &[i64],
     progress: &mut dyn FnMut(usize, usize),
-) -> Reconstruction {
+) -> Deviation {
     let encoder = dynamic.motion.as_ref().expect("a motion stage");
     let device = data.garment.device();
     let teacher = TeacherFrames::new(dynamic, data, fps);
@@ -309,7 +310,7 @@ pub fn one_step_linear(
         progress(s + n, frames.len());
         teacher.posed.at(&idx).skin(&dynamic.space.canonical(&z))
     });
-    Reconstruction::of(&pred, &data.garment.index_select(0, &idx_all))
+    deviation(&pred, &data.garment.index_select(0, &idx_all))
 }
 
 /// Every training frame's per-vertex seed transforms, blended once (the body never changes

@@ -141,7 +141,9 @@ impl Validation {
         match &self.replay {
             Some(x) => println!(
                 "validate {clip}: {verdict}; replay max {:.4} mm, mean {:.4} mm, p99 {:.4} mm",
-                x.max_mm, x.mean_mm, x.p99_mm
+                x.error.max_mm,
+                x.error.mean_mm,
+                x.error.p99_mm.unwrap_or(f64::NAN)
             ),
             None => println!("validate {clip}: {verdict}"),
         }
@@ -179,7 +181,7 @@ pub fn check_file(
             "replay",
             format!(
                 "max error {:.3} mm (frame {}, vertex {}) exceeds the tolerance of {} mm",
-                r.max_mm, r.worst_frame, r.worst_vertex, r.tolerance_mm
+                r.error.max_mm, r.error.worst_frame, r.worst_vertex, r.tolerance_mm
             ),
         );
     }

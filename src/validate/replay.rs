@@ -4,6 +4,7 @@
 //! `eval`'s caches and so would agree with any fault of its own), in mm, every frame.
 
 use crate::bake::skinned_mesh_asset;
+use crate::metrics::deviation::Deviation;
 use crate::models::file::ModelFile;
 use crate::preview::{render_panel, save_png, ErrorBands, Framing, Panel, View};
 use crate::rig::SkelAnimation;
@@ -98,13 +99,10 @@ impl Reference {
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ReplayError {
     pub clip: String,
-    pub frames: usize,
     pub vertices: usize,
-    pub max_mm: f64,
-    pub mean_mm: f64,
-    pub p99_mm: f64,
-    pub worst_frame: usize,
-    /// The file's vertex (for a glTF, its own index after seam splits).
+    #[serde(flatten)]
+    pub error: Deviation,
+    /// The file's vertex of the largest error (for a glTF, its own index after seam splits).
     pub worst_vertex: usize,
     pub tolerance_mm: f64,
     pub passed: bool,
@@ -139,22 +137,13 @@ pub fn compare(
                 .collect()
         })
         .collect();
-    let mut all: Vec<f64> = per_frame.iter().flatten().copied().collect();
-    let (mut worst_frame, mut worst_vertex, mut max) = (0, 0, 0.0);
-    for (f, errors) in per_frame.iter().enumerate() {
-        for (v, &e) in errors.iter().enumerate() {
-            // NaN counts as the worst possible error.
-            if e > max || e.is_nan() && !f64::is_nan(max) {
-                (worst_frame, worst_vertex, max) = (f, v, e);
-            }
-        }
-    }
-    let mean = all.iter().sum::<f64>() / all.len().max(1) as f64;
-    all.sort_by(f64::total_cmp);
-    let p99 = all
-        .get(((all.len() as f64 * 0.99) as usize).min(all.len().saturating_sub(1)))
-        .copied()
-        .unwrap_or(0.0);
+    let error = Deviation::of(&per_frame);
+    let worst_frame = error.worst_frame;
+    let worst_vertex = per_frame.get(worst_frame).map_or(0, |errors| {
+        (0..errors.len())
+            .find(|&v| errors[v] == error.max_mm || errors[v].is_nan())
+            .unwrap_or(0)
+    });
     let mut worst_frame_errors = vec![0.0f64; reference.vertex_count()];
     for (v, &e) in per_frame.get(worst_frame).into_iter().flatten().enumerate() {
         let m = map[v] as usize;
@@ -162,27 +151,23 @@ pub fn compare(
     }
     ReplayError {
         clip: reference.clip.clone(),
-        frames: per_frame.len(),
         vertices: map.len(),
-        max_mm: max,
-        mean_mm: mean,
-        p99_mm: p99,
-        worst_frame,
+        error,
         worst_vertex,
         tolerance_mm,
-        passed: max <= tolerance_mm,
+        passed: error.max_mm <= tolerance_mm,
         worst_frame_errors,
     }
 }
 
 /// The model's garment at the worst frame, each triangle coloured by its largest vertex error
 /// relative to the tolerance (front view), written atomically as PNG.
-pub fn error_png(reference: &Reference, error: &ReplayError, path: &Path) -> Result<()> {
-    let points = &reference.frames[error.worst_frame];
+pub fn error_png(reference: &Reference, replay: &ReplayError, path: &Path) -> Result<()> {
+    let points = &reference.frames[replay.error.worst_frame];
     let bands = ErrorBands::new(
         &reference.triangles,
-        &error.worst_frame_errors,
-        error.tolerance_mm,
+        &replay.worst_frame_errors,
+        replay.tolerance_mm,
     );
     let meshes = bands.meshes(points);
     let panel = Panel {
@@ -190,7 +175,7 @@ pub fn error_png(reference: &Reference, error: &ReplayError, path: &Path) -> Res
         view: View::Front,
         label: format!(
             "{} frame {}: max {:.3} mm (tolerance {} mm)",
-            error.clip, error.worst_frame, error.max_mm, error.tolerance_mm
+            replay.clip, replay.error.worst_frame, replay.error.max_mm, replay.tolerance_mm
         ),
     };
     let framing = Framing::fit_meshes(&panel.meshes, View::Front);

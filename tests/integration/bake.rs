@@ -223,7 +223,7 @@ fn threejs_case(test: &str, args: &[&str], limit_m: f64) {
     // The bake measures its replay against the network's forward pass, not against the basis
     // and skin it was made from (that comparison agreed with itself whatever was read out of
     // the network): it must find what three.js finds against `eval`.
-    let own = baked["report"]["clips"][0]["max_error_m"].as_f64().unwrap();
+    let own = baked["report"]["clips"][0]["max_mm"].as_f64().unwrap() / 1e3;
     eprintln!(
         "{test}: bake's own replay error {:.4} mm, three.js {:.4} mm",
         own * 1e3,

@@ -560,7 +560,7 @@ fn model_with_another_skeleton_is_a_clear_error() {
         skeleton: skeleton_asset(&other),
         meshes: vec![skinned_mesh_asset(
             "body",
-            &b.mesh(),
+            b.mesh(),
             Some(&b.normals),
             &b.skin,
             BODY_COLOR,

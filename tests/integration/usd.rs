@@ -311,7 +311,7 @@ fn skirt_asset(frames: usize, shapes: usize, fps: f32) -> SkirtAsset {
     }
     let body_mesh = skinned_mesh_asset(
         &body.name,
-        &body.mesh(),
+        body.mesh(),
         Some(&body.normals),
         &body.skin,
         BODY_COLOR,
@@ -450,7 +450,7 @@ fn blend_shapes_and_six_influences_replay_through_usdskel() {
 }
 
 fn cache_of(body: &Body, anim: &SkelAnimation, frames: usize) -> asset::PointCache {
-    let mesh = skinned_mesh_asset("body", &body.mesh(), None, &body.skin, BODY_COLOR);
+    let mesh = skinned_mesh_asset("body", body.mesh(), None, &body.skin, BODY_COLOR);
     asset::PointCache {
         name: "body cache".into(),
         fps: anim.fps,

@@ -172,7 +172,7 @@ pub fn run(request: &Request, outputs: OutputSet, feedback: &Feedback) -> Result
         (_, Some(b)) if r.with_body => {
             let meshes = [
                 ("garment", &file.garment, rollout.frames.as_slice()),
-                ("body", &body.mesh(), b.as_slice()),
+                ("body", body.mesh(), b.as_slice()),
             ];
             write_caches_in(out, &meshes, fps, r.space).map(|()| None)
         }
@@ -191,7 +191,7 @@ pub fn run(request: &Request, outputs: OutputSet, feedback: &Feedback) -> Result
         })?;
     }
     if let (Some(path), Some(b)) = (&r.body_out, &bodies) {
-        outputs.write(path, |p| write_cache_in(p, &body.mesh(), b, fps, r.space))?;
+        outputs.write(path, |p| write_cache_in(p, body.mesh(), b, fps, r.space))?;
     }
     let view = match &r.view {
         Some(page) => {

@@ -219,9 +219,7 @@ impl Display for Report {
                 writeln!(
                     f,
                     "--max-targets {k} costs {:.3} mm: the glTF replays the roll-out within {:.3} mm at every frame (mean {:.4} mm)",
-                    b.max_error_m * 1e3,
-                    b.max_error_m * 1e3,
-                    b.mean_error_m * 1e3
+                    b.error.max_mm, b.error.max_mm, b.error.mean_mm
                 )?;
             }
             writeln!(
@@ -235,8 +233,8 @@ impl Display for Report {
                     "32-bit floats"
                 },
                 b.max_weight,
-                b.max_error_m * 1e3,
-                b.mean_error_m * 1e3
+                b.error.max_mm,
+                b.error.mean_mm
             )?;
         }
         writeln!(
