@@ -90,6 +90,9 @@ pub struct HemScore {
     /// Amplitude over the simulations' (mean over runs): 1 for a garment that swings as they
     /// do, below 1 for a blur, 0 for the baseline.
     pub amplitude_ratio: f64,
+    /// Lag of the hem's centroid behind the runs' mean (positive: late), beside each run's
+    /// behind the others' ([`HemEnsemble::behind_the_others`]): when the swings come.
+    pub behind_the_runs: Option<Lag>,
 }
 
 /// The simulations' own hem figures: the ceiling and the targets.
@@ -106,6 +109,8 @@ pub struct HemEnsemble {
     pub correlation_with_the_others: Option<f64>,
     /// Each run's swing; the spectrum of their mean power.
     pub runs: Vec<Swing>,
+    /// Each run's hem centroid behind the mean of the others (the timing a re-run has).
+    pub behind_the_others: Vec<Option<Lag>>,
     pub amplitude_mm: f64,
     pub spectrum: Vec<hem::Bin>,
 }
@@ -193,14 +198,25 @@ pub fn compare(inputs: &Inputs, settings: &Settings) -> Result<Report> {
             .map(|(i, j)| hem::correlation(&runs[i], &runs[j]))
             .collect(),
     );
+    let others_mean = |i: usize| {
+        let others: Vec<&Trace> = (0..n).filter(|&j| j != i).map(|j| &runs[j]).collect();
+        hem::mean_trace(&others)
+    };
     let with_others = mean_of(
         (0..n)
-            .map(|i| {
-                let others: Vec<&Trace> = (0..n).filter(|&j| j != i).map(|j| &runs[j]).collect();
-                hem::correlation(&runs[i], &hem::mean_trace(&others))
-            })
+            .map(|i| hem::correlation(&runs[i], &others_mean(i)))
             .collect(),
     );
+    let behind = |r: &Trace, drive: &Trace| {
+        hem::lag(
+            &hem::centroid(r),
+            &hem::centroid(drive),
+            max_lag,
+            inputs.fps,
+        )
+    };
+    let behind_the_others: Vec<Option<Lag>> =
+        (0..n).map(|i| behind(&runs[i], &others_mean(i))).collect();
     let run_spectra: Vec<Vec<hem::Bin>> = runs
         .iter()
         .map(|r| hem::power_spectrum(r, inputs.fps))
@@ -263,6 +279,7 @@ pub fn compare(inputs: &Inputs, settings: &Settings) -> Result<Report> {
             correlation_with_mean: hem::correlation(&r, &runs_mean),
             correlation_with_each: mean_of(runs.iter().map(|s| hem::correlation(&r, s)).collect()),
             amplitude_ratio: hem::amplitude_mm(&r) / sims_amplitude.max(1e-12),
+            behind_the_runs: behind(&r, &runs_mean),
             swing: swing(&r),
         };
         caches.push(CacheReport {
@@ -289,6 +306,7 @@ pub fn compare(inputs: &Inputs, settings: &Settings) -> Result<Report> {
             mutual_correlation: mutual,
             correlation_with_the_others: with_others,
             runs: run_swings,
+            behind_the_others,
             amplitude_mm: sims_amplitude,
             spectrum: sims_spectrum,
         },
@@ -560,6 +578,15 @@ impl std::fmt::Display for Report {
             opt(h.correlation_with_the_others),
             h.runs.iter().map(|s| lag(&s.lag)).collect::<Vec<_>>().join(", ")
         )?;
+        writeln!(
+            f,
+            "  each run's hem behind the others' mean: {}",
+            h.behind_the_others
+                .iter()
+                .map(lag)
+                .collect::<Vec<_>>()
+                .join(", ")
+        )?;
         let spectrum = |s: &crate::metrics::hem::SpectrumSummary| {
             format!(
                 "peak {:.2} Hz, centroid {:.2} Hz, {:.0} % above 1 Hz",
@@ -577,12 +604,13 @@ impl std::fmt::Display for Report {
             let m = &c.hem;
             writeln!(
                 f,
-                "  {:<12} correlation with the runs' mean {}, with each {}, amplitude ratio {:.2}, lag {}, {}",
+                "  {:<12} correlation with the runs' mean {}, with each {}, amplitude ratio {:.2}, lag {}, behind the runs {}, {}",
                 c.name,
                 opt(m.correlation_with_mean),
                 opt(m.correlation_with_each),
                 m.amplitude_ratio,
                 lag(&m.swing.lag),
+                lag(&m.behind_the_runs),
                 spectrum(&m.swing.spectrum)
             )?;
         }
