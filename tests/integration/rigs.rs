@@ -444,7 +444,7 @@ fn every_character_creator_take_poses_with_the_feet_on_the_floor() {
                 .iter()
                 .any(|&k| (pos[f][k] - pos[f - 1][k]).xz().norm() * anim.fps < 0.2);
             if slow && on_floor[f] {
-                stance.push(low[f].abs());
+                stance.push(low[f]);
             }
         }
         if stance.len() < 5 {
@@ -454,10 +454,15 @@ fn every_character_creator_take_poses_with_the_feet_on_the_floor() {
             }
             continue;
         }
+        // Signed heights (below the floor: negative), then their sizes.
+        stance.sort_by(f32::total_cmp);
+        let signed = |q: usize| stance[stance.len() * q / 100] * 1e3;
+        let (p5, p50) = (signed(5), signed(50));
+        let mut stance: Vec<f32> = stance.iter().map(|h| h.abs()).collect();
         stance.sort_by(f32::total_cmp);
         let p95 = stance[stance.len() * 95 / 100];
         eprintln!(
-            "{name}: p95 {:.1} mm over {} standing frames",
+            "{name}: p95 {:.1} mm over {} standing frames (signed height p5 {p5:.1}, median {p50:.1} mm)",
             p95 * 1e3,
             stance.len()
         );
