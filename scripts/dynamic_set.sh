@@ -12,8 +12,10 @@
 #
 # Writes DIR/TAKE_skirt_sim.pc2 (+ .json figures), DIR/TAKE_skirt_sim_pN.pc2 for the validation
 # runs, and DIR/train.txt: the `--motion/--sim` arguments of the training takes for train-dynamic.
-# A take whose cache is already in DIR is kept (delete it to simulate it again). About 0.45 s per
-# frame of the skirt on 2 cores: ~60 minutes for the training takes, ~10 for the validation runs.
+# A take whose cache is already in DIR is kept (delete it to simulate it again). Blender's cloth
+# solver keeps one core busy, so JOBS simulations (default: the machine's cores) run side by side,
+# each one's progress in DIR/TAKE_skirt_sim*.log. About 0.45 s per frame of the skirt: on 2 cores
+# ~30 minutes for the training takes and ~6 for the validation runs (one at a time: ~60 and ~12).
 # 007_03, 007_05 and 007_12 are not in the set: Blender's cloth explodes on them at the clip's
 # first frame (a vertex at 56–65 m/s against the 30 m/s limit; nothing written). 005_06 (a cartwheel) is
 # simulated but not trained on: upside down, the seeds' blended skinning of the skirt between the
@@ -22,6 +24,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 DIR=${1:-runs/dynamic_set}
 GB=${GB:-target/debug/garmentbake}
+JOBS=${JOBS:-$(nproc)}
 [ -x "$GB" ] || cargo build
 mkdir -p "$DIR"
 CC=../shared/data/mocap/cc_base
@@ -32,16 +35,19 @@ $CC/005_13 $CC/005_18 $CC/005_20 $CC/006_01 $CC/006_02 $CC/006_10 $CC/006_12 $CC
 $CC/005_08
 $CC/001_14 $CC/002_08 $CC/005_16 $CC/005_19 $CC/006_07 $CC/005_09"
 VALIDATION="$M/131_02 $CC/002_04 $CC/006_14"
-sim() { # clip out [extra simulate flags]
+sim() { # clip out [extra simulate flags]: in the background, at most JOBS at once
     local clip=$1 out=$2
     shift 2
     if [ -s "$out" ]; then
         echo "kept $out"
         return
     fi
-    echo "simulating $(basename "$clip") -> $out $*"
+    while [ "$(jobs -rp | wc -l)" -ge "$JOBS" ]; do
+        wait -n || true
+    done
+    echo "simulating $(basename "$clip") -> $out $* (progress in ${out%.pc2}.log)"
     "$GB" simulate --body samples/body.glb --garment samples/garments/skirt.obj \
-        --motion "$clip.bvh" --fps 30 --out "$out" "$@" --json > "${out%.pc2}.json"
+        --motion "$clip.bvh" --fps 30 --out "$out" "$@" --json > "${out%.pc2}.json" 2> "${out%.pc2}.log" &
 }
 ARGS=""
 for clip in $TRAIN; do
@@ -56,4 +62,19 @@ for clip in $VALIDATION; do
         sim "$clip" "$DIR/${name}_skirt_sim_p$n.pc2" --perturb $n
     done
 done
+wait
+# A failed simulation writes no cache (the writes are atomic): name what is missing.
+missing=""
+for clip in $TRAIN; do
+    [ -s "$DIR/$(basename "$clip")_skirt_sim.pc2" ] || missing="$missing $(basename "$clip")"
+done
+for clip in $VALIDATION; do
+    for n in 0 1 2; do
+        [ -s "$DIR/$(basename "$clip")_skirt_sim_p$n.pc2" ] || missing="$missing $(basename "$clip")_p$n"
+    done
+done
+if [ -n "$missing" ]; then
+    echo "error: not simulated:$missing (each one's .log in $DIR says why); run the script again to redo them" >&2
+    exit 1
+fi
 echo "wrote $DIR: $(echo $TRAIN | wc -w) training takes (train.txt), 3 runs of each of $(echo $VALIDATION | wc -w) validation clips"
