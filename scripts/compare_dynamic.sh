@@ -51,10 +51,12 @@ import json, sys
 d = json.load(open(sys.argv[1]))
 s = d["spread"]["sigma_mm"]
 print(f"{sys.argv[1]}: {d['frames']} frames, runs' spread sigma {s['clip']:.1f} mm (first 50: {s['first_50']:.1f}); hem ceiling {d['hem']['mutual_correlation']:.2f}")
-print(f"{'cache':10} {'b clip':>7} {'b 50':>6} {'e1':>6} {'e10':>6} {'e25':>6} {'e50':>6} {'hem r':>6} {'amp':>5} {'strain':>7} {'p99':>6} {'inside':>7}")
+late = lambda l: "     -" if not l else f"{l['seconds']:+6.2f}"
+print("runs' hem behind the others' mean (s): " + ", ".join(late(l).strip() for l in d["hem"].get("behind_the_others", [])))
+print(f"{'cache':10} {'b clip':>7} {'b 50':>6} {'e1':>6} {'e10':>6} {'e25':>6} {'e50':>6} {'hem r':>6} {'amp':>5} {'late s':>6} {'strain':>7} {'p99':>6} {'inside':>7}")
 for c in d["caches"]:
     own, hz, hem, p = c["score"]["own_mm"], c["horizon_mm"] or [], c["hem"], c["plausibility"]
     e = [f"{hz[k - 1]:6.1f}" if len(hz) >= k else "     -" for k in (1, 10, 25, 50)]
     r = hem["correlation_with_each"]
-    print(f"{c['name']:10} {own['clip']:7.1f} {own['first_50']:6.1f} {' '.join(e)} {r if r is None else round(r, 2)!s:>6} {hem['amplitude_ratio']:5.2f} {p['strain_mean_pct']:6.1f}% {p['strain_p99_pct']:5.0f}% {c['inside_pct']:6.3f}%")
+    print(f"{c['name']:10} {own['clip']:7.1f} {own['first_50']:6.1f} {' '.join(e)} {r if r is None else round(r, 2)!s:>6} {hem['amplitude_ratio']:5.2f} {late(hem.get('behind_the_runs'))} {p['strain_mean_pct']:6.1f}% {p['strain_p99_pct']:5.0f}% {c['inside_pct']:6.3f}%")
 PY
