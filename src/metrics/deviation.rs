@@ -45,7 +45,7 @@ impl Deviation {
     pub fn of_largest_and_mean(per_frame: &[(f64, f64)]) -> Deviation {
         let (mut worst_frame, mut max) = (0, 0.0);
         for (f, &(m, _)) in per_frame.iter().enumerate() {
-            if m > max || m.is_nan() && !f64::is_nan(max) {
+            if worse(m, max) {
                 (worst_frame, max) = (f, m);
             }
         }
@@ -57,28 +57,16 @@ impl Deviation {
             worst_frame,
         }
     }
+}
 
-    /// `mean 1.23 mm, p99 2.34 mm, max 3.45 mm (frame 12)`.
-    pub fn summary(&self) -> String {
-        let p99 = self
-            .p99_mm
-            .map_or(String::new(), |p| format!(", p99 {p:.3} mm"));
-        format!(
-            "mean {:.3} mm{p99}, max {:.3} mm (frame {})",
-            self.mean_mm, self.max_mm, self.worst_frame
-        )
-    }
+/// Whether distance `x` is worse than `than`: larger, or a NaN (the worst) where `than` is not.
+fn worse(x: f64, than: f64) -> bool {
+    x > than || x.is_nan() && !than.is_nan()
 }
 
 /// The largest of `d`, a NaN counting as the largest.
 fn largest(d: &[f64]) -> f64 {
-    d.iter().fold(0.0, |m: f64, &x| {
-        if x > m || x.is_nan() && !m.is_nan() {
-            x
-        } else {
-            m
-        }
-    })
+    d.iter().fold(0.0, |m, &x| if worse(x, m) { x } else { m })
 }
 
 #[cfg(test)]
