@@ -179,14 +179,17 @@ pub fn compare(inputs: &Inputs, settings: &Settings) -> Result<Report> {
     let residual = |f: &[Vec<[f32; 3]>]| hem::residual(&hem_of(f), baseline.as_ref());
     let velocity = hem::pelvis_velocity(&waist, inputs.fps);
     let max_lag = (settings.max_lag_s * inputs.fps).round() as usize;
-    let swing = |r: &Trace| Swing {
+    // A trace's centroid serves its swing, its timing and the hem picture: found once.
+    let swing = |r: &Trace, centroid: &[[f64; 3]]| Swing {
         amplitude_mm: hem::amplitude_mm(r),
-        lag: hem::lag(&hem::centroid(r), &velocity, max_lag, inputs.fps),
+        lag: hem::lag(centroid, &velocity, max_lag, inputs.fps),
         spectrum: hem::summarise(&hem::power_spectrum(r, inputs.fps)),
     };
     let runs: Vec<Trace> = inputs.simulations.iter().map(|s| residual(s)).collect();
+    let run_centroids: Vec<Vec<[f64; 3]>> = runs.iter().map(hem::centroid).collect();
     let run_refs: Vec<&Trace> = runs.iter().collect();
     let runs_mean = hem::mean_trace(&run_refs);
+    let runs_mean_centroid = hem::centroid(&runs_mean);
     let n = runs.len();
     let mean_of = |v: Vec<Option<f64>>| {
         let v: Vec<f64> = v.into_iter().flatten().collect();
@@ -207,16 +210,11 @@ pub fn compare(inputs: &Inputs, settings: &Settings) -> Result<Report> {
             .map(|i| hem::correlation(&runs[i], &others_mean(i)))
             .collect(),
     );
-    let behind = |r: &Trace, drive: &Trace| {
-        hem::lag(
-            &hem::centroid(r),
-            &hem::centroid(drive),
-            max_lag,
-            inputs.fps,
-        )
-    };
-    let behind_the_others: Vec<Option<Lag>> =
-        (0..n).map(|i| behind(&runs[i], &others_mean(i))).collect();
+    let behind =
+        |centroid: &[[f64; 3]], drive: &[[f64; 3]]| hem::lag(centroid, drive, max_lag, inputs.fps);
+    let behind_the_others: Vec<Option<Lag>> = (0..n)
+        .map(|i| behind(&run_centroids[i], &hem::centroid(&others_mean(i))))
+        .collect();
     let run_spectra: Vec<Vec<hem::Bin>> = runs
         .iter()
         .map(|r| hem::power_spectrum(r, inputs.fps))
@@ -227,7 +225,11 @@ pub fn compare(inputs: &Inputs, settings: &Settings) -> Result<Report> {
             power_mm2: run_spectra.iter().map(|s| s[b].power_mm2).sum::<f64>() / n as f64,
         })
         .collect();
-    let run_swings: Vec<Swing> = runs.iter().map(swing).collect();
+    let run_swings: Vec<Swing> = runs
+        .iter()
+        .zip(&run_centroids)
+        .map(|(r, c)| swing(r, c))
+        .collect();
     let sims_amplitude = run_swings.iter().map(|s| s.amplitude_mm).sum::<f64>() / n as f64;
     let setup = ClipSetup::unpinned(inputs.body, inputs.garment, inputs.fps);
     let inside = |f: &[Vec<[f32; 3]>]| {
@@ -258,6 +260,7 @@ pub fn compare(inputs: &Inputs, settings: &Settings) -> Result<Report> {
         model: None,
     });
     let all: Vec<&Cache> = inputs.caches.iter().chain(mean.as_ref()).collect();
+    let mut cache_centroids = Vec::new();
     for &cache in &all {
         let horizon_mm = match &cache.model {
             Some(model) => restarted_horizon(
@@ -274,14 +277,16 @@ pub fn compare(inputs: &Inputs, settings: &Settings) -> Result<Report> {
             })?,
         };
         let r = residual(&cache.frames);
+        let centroid = hem::centroid(&r);
         let spectrum = hem::power_spectrum(&r, inputs.fps);
         let hem_score = HemScore {
             correlation_with_mean: hem::correlation(&r, &runs_mean),
             correlation_with_each: mean_of(runs.iter().map(|s| hem::correlation(&r, s)).collect()),
             amplitude_ratio: hem::amplitude_mm(&r) / sims_amplitude.max(1e-12),
-            behind_the_runs: behind(&r, &runs_mean),
-            swing: swing(&r),
+            behind_the_runs: behind(&centroid, &runs_mean_centroid),
+            swing: swing(&r, &centroid),
         };
+        cache_centroids.push(centroid);
         caches.push(CacheReport {
             name: cache.name.clone(),
             score: ensemble.score(&cache.frames),
@@ -321,14 +326,14 @@ pub fn compare(inputs: &Inputs, settings: &Settings) -> Result<Report> {
             .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
     }
     if let Some(path) = &settings.hem_png {
-        let mut traces: Vec<(String, Vec<f64>)> = runs
+        let mut traces: Vec<(String, Vec<f64>)> = run_centroids
             .iter()
             .enumerate()
-            .map(|(i, r)| (format!("sim {i}"), forward(r)))
+            .map(|(i, c)| (format!("sim {i}"), forward(c)))
             .collect();
-        traces.push(("sims mean".into(), forward(&runs_mean)));
-        for c in &all {
-            traces.push((c.name.clone(), forward(&residual(&c.frames))));
+        traces.push(("sims mean".into(), forward(&runs_mean_centroid)));
+        for (c, centroid) in all.iter().zip(&cache_centroids) {
+            traces.push((c.name.clone(), forward(centroid)));
         }
         crate::preview::save_png(&hem_chart(&report, &traces, n), path)
             .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
@@ -368,9 +373,9 @@ fn restarted_horizon(
     curve
 }
 
-/// The hem residual's centroid along the waist frame's forward axis (+z at rest), mm.
-fn forward(r: &Trace) -> Vec<f64> {
-    hem::centroid(r).iter().map(|p| 1e3 * p[2]).collect()
+/// A hem residual's centroid along the waist frame's forward axis (+z at rest), mm.
+fn forward(centroid: &[[f64; 3]]) -> Vec<f64> {
+    centroid.iter().map(|p| 1e3 * p[2]).collect()
 }
 
 const SIM_GREY: [u8; 3] = [150, 150, 150];

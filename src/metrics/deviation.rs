@@ -21,22 +21,23 @@ pub struct Deviation {
 }
 
 impl Deviation {
-    /// From every distance (mm), frame by frame (frames of equal vertex counts).
-    pub fn of<D: AsRef<[f64]>>(per_frame: &[D]) -> Deviation {
+    /// From every distance (mm), frame by frame (frames of equal vertex counts), in f32 or f64.
+    pub fn of<T: Copy + Into<f64>, D: AsRef<[T]>>(per_frame: &[D]) -> Deviation {
         let summaries: Vec<(f64, f64)> = per_frame
             .iter()
             .map(|d| {
                 let d = d.as_ref();
-                (largest(d), d.iter().sum::<f64>() / d.len().max(1) as f64)
+                let largest = d.get(worst_index(d)).map_or(0.0, |&x| x.into());
+                let sum: f64 = d.iter().map(|&x| x.into()).sum();
+                (largest, sum / d.len().max(1) as f64)
             })
             .collect();
         let mut all: Vec<f32> = per_frame
             .iter()
-            .flat_map(|d| d.as_ref().iter().map(|&x| x as f32))
+            .flat_map(|d| d.as_ref().iter().map(|&x| x.into() as f32))
             .collect();
-        all.sort_by(f32::total_cmp);
         Deviation {
-            p99_mm: Some(super::percentile(&all, 0.99)),
+            p99_mm: Some(super::percentile_unsorted(&mut all, 0.99)),
             ..Deviation::of_largest_and_mean(&summaries)
         }
     }
@@ -64,9 +65,15 @@ fn worse(x: f64, than: f64) -> bool {
     x > than || x.is_nan() && !than.is_nan()
 }
 
-/// The largest of `d`, a NaN counting as the largest.
-fn largest(d: &[f64]) -> f64 {
-    d.iter().fold(0.0, |m, &x| if worse(x, m) { x } else { m })
+/// Where the largest of `d` is (the first of equals), a NaN counting as the largest; 0 for none.
+pub fn worst_index<T: Copy + Into<f64>>(d: &[T]) -> usize {
+    let mut at = 0;
+    for (i, &x) in d.iter().enumerate().skip(1) {
+        if worse(x.into(), d[at].into()) {
+            at = i;
+        }
+    }
+    at
 }
 
 #[cfg(test)]
@@ -88,5 +95,12 @@ mod tests {
         let nan = Deviation::of(&[vec![1.0], vec![f64::NAN], vec![3.0]]);
         assert_eq!(nan.worst_frame, 1);
         assert!(nan.max_mm.is_nan());
+        assert_eq!(worst_index(&[1.0f32, 5.0, f32::NAN, 5.0]), 2);
+        assert_eq!(worst_index(&[1.0f32, 5.0, 2.0, 5.0]), 1);
+        // f32 distances give the f64 figures.
+        assert_eq!(
+            Deviation::of(&[vec![1.0f32; 100], vec![2.0f32; 100]]).p99_mm,
+            Some(2.0)
+        );
     }
 }

@@ -268,6 +268,18 @@ pub fn percentile(sorted: &[f32], q: f64) -> f64 {
     }
 }
 
+/// The same quantile of values in any order (reordered in place; NaNs rank above everything,
+/// as `f32::total_cmp` sorts them): a selection, not a sort, for millions of distances.
+pub fn percentile_unsorted(values: &mut [f32], q: f64) -> f64 {
+    match values.len() {
+        0 => 0.0,
+        n => {
+            let rank = ((q * n as f64).ceil() as usize).clamp(1, n) - 1;
+            *values.select_nth_unstable_by(rank, f32::total_cmp).1 as f64
+        }
+    }
+}
+
 /// Per-vertex distance (mm) between two frames of one garment.
 pub fn vertex_distances_mm(a: &[[f32; 3]], b: &[[f32; 3]]) -> Vec<f64> {
     a.iter()

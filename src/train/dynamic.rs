@@ -276,10 +276,6 @@ pub fn deviation(pred: &Tensor, truth: &Tensor) -> Deviation {
         .sqrt()
         * 1e3;
     let per_frame: Vec<Vec<f32>> = d.try_into().unwrap_or_default();
-    let per_frame: Vec<Vec<f64>> = per_frame
-        .into_iter()
-        .map(|f| f.into_iter().map(f64::from).collect())
-        .collect();
     Deviation::of(&per_frame)
 }
 

@@ -4,7 +4,7 @@
 //! `eval`'s caches and so would agree with any fault of its own), in mm, every frame.
 
 use crate::bake::skinned_mesh_asset;
-use crate::metrics::deviation::Deviation;
+use crate::metrics::deviation::{worst_index, Deviation};
 use crate::models::file::ModelFile;
 use crate::preview::{render_panel, save_png, ErrorBands, Framing, Panel, View};
 use crate::rig::SkelAnimation;
@@ -139,11 +139,9 @@ pub fn compare(
         .collect();
     let error = Deviation::of(&per_frame);
     let worst_frame = error.worst_frame;
-    let worst_vertex = per_frame.get(worst_frame).map_or(0, |errors| {
-        (0..errors.len())
-            .find(|&v| errors[v] == error.max_mm || errors[v].is_nan())
-            .unwrap_or(0)
-    });
+    let worst_vertex = per_frame
+        .get(worst_frame)
+        .map_or(0, |errors| worst_index(errors));
     let mut worst_frame_errors = vec![0.0f64; reference.vertex_count()];
     for (v, &e) in per_frame.get(worst_frame).into_iter().flatten().enumerate() {
         let m = map[v] as usize;
