@@ -27,9 +27,9 @@ pub(super) const SHORT_HIDES: [&str; 3] = ["float_targets", "out_units", "out_up
 /// each later clip starts where the previous one ended, its first frames blended from the last
 /// pose (--fade). Per frame, the decoded garment's edges are pulled back within 2 % of their
 /// rest lengths (the strain limit), and a garment that crosses the body is pushed out, the edges
-/// around the pushed vertices kept (the collision fix; --collision-solver paper: the paper's
-/// Adam fit of a UV displacement map). --no-collision-fix --strain-iterations 0 shows the
-/// network alone.
+/// around the pushed vertices kept, and a vertex still inside the body lifted out (the collision
+/// fix; --collision-solver paper: the paper's Adam fit of a UV displacement map).
+/// --no-collision-fix --strain-iterations 0 shows the network alone.
 ///
 /// Writes the garment per frame as a point cache (.pc2, Blender's Mesh Cache reads it; .usda/
 /// .usdc/.usd: time-sampled points). --reference SIM.pc2 (a `simulate` cache of the same clip)

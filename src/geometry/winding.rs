@@ -122,8 +122,8 @@ pub fn winding_number_exact(positions: &[[f32; 3]], triangles: &[[u32; 3]], p: [
     total / FOUR_PI
 }
 
-/// Squared distance from `p` to segment `a`-`b` (a point when a == b).
-fn segment_distance2(p: &Vec3, a: &Vec3, b: &Vec3) -> f64 {
+/// The point of segment ab closest to `p`.
+fn segment_closest(p: &Vec3, a: &Vec3, b: &Vec3) -> Vec3 {
     let ab = b - a;
     let len2 = ab.norm_squared();
     let t = if len2 > 0.0 {
@@ -131,55 +131,104 @@ fn segment_distance2(p: &Vec3, a: &Vec3, b: &Vec3) -> f64 {
     } else {
         0.0
     };
-    (p - (a + t * ab)).norm_squared()
+    a + t * ab
 }
 
-/// Squared distance from `p` to the closest point of triangle `t`, by classifying
-/// `p` against the triangle's Voronoi regions (vertices, edges, face). Zero-area
-/// triangles fall back to their three edges, where the region test would divide by 0.
-fn triangle_distance2(t: &Triangle, p: &Vec3) -> f64 {
+/// Squared distance from `p` to segment `a`-`b` (a point when a == b).
+fn segment_distance2(p: &Vec3, a: &Vec3, b: &Vec3) -> f64 {
+    (p - segment_closest(p, a, b)).norm_squared()
+}
+
+/// Which part of a triangle (not flat) is closest to a point: a corner, an edge or the face.
+enum Feature {
+    Corner(usize),
+    Edge(usize, usize),
+    Face,
+}
+
+/// Classifies `p` against the Voronoi regions of triangle `t` (corners, edges, face).
+fn closest_feature(t: &Triangle, p: &Vec3) -> Feature {
     let [a, b, c] = t.v;
-    if t.flat {
-        return segment_distance2(p, &a, &b)
-            .min(segment_distance2(p, &b, &c))
-            .min(segment_distance2(p, &c, &a));
-    }
     let ab = b - a;
     let ac = c - a;
     let ap = p - a;
     let d1 = ab.dot(&ap);
     let d2 = ac.dot(&ap);
     if d1 <= 0.0 && d2 <= 0.0 {
-        return ap.norm_squared();
+        return Feature::Corner(0);
     }
     let bp = p - b;
     let d3 = ab.dot(&bp);
     let d4 = ac.dot(&bp);
     if d3 >= 0.0 && d4 <= d3 {
-        return bp.norm_squared();
+        return Feature::Corner(1);
     }
     let vc = d1 * d4 - d3 * d2;
     if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
-        return segment_distance2(p, &a, &b);
+        return Feature::Edge(0, 1);
     }
     let cp = p - c;
     let d5 = ab.dot(&cp);
     let d6 = ac.dot(&cp);
     if d6 >= 0.0 && d5 <= d6 {
-        return cp.norm_squared();
+        return Feature::Corner(2);
     }
     let vb = d5 * d2 - d1 * d6;
     if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
-        return segment_distance2(p, &a, &c);
+        return Feature::Edge(0, 2);
     }
     let va = d3 * d6 - d5 * d4;
     if va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0 {
-        return segment_distance2(p, &b, &c);
+        return Feature::Edge(1, 2);
     }
-    // Face region: distance to the supporting plane (more exact than projecting).
-    let n = ab.cross(&ac);
-    let h = ap.dot(&n);
-    h * h / n.norm_squared()
+    Feature::Face
+}
+
+/// The three edges of a triangle, as corner pairs.
+const EDGES: [(usize, usize); 3] = [(0, 1), (1, 2), (2, 0)];
+
+/// Squared distance from `p` to the closest point of triangle `t`, by classifying
+/// `p` against the triangle's Voronoi regions (vertices, edges, face). Zero-area
+/// triangles are measured to their edges.
+fn triangle_distance2(t: &Triangle, p: &Vec3) -> f64 {
+    let v = &t.v;
+    if t.flat {
+        return EDGES
+            .iter()
+            .map(|&(i, j)| segment_distance2(p, &v[i], &v[j]))
+            .fold(f64::INFINITY, f64::min);
+    }
+    match closest_feature(t, p) {
+        Feature::Corner(i) => (p - v[i]).norm_squared(),
+        Feature::Edge(i, j) => segment_distance2(p, &v[i], &v[j]),
+        Feature::Face => {
+            // Distance to the supporting plane (more exact than projecting).
+            let n = (v[1] - v[0]).cross(&(v[2] - v[0]));
+            let h = (p - v[0]).dot(&n);
+            h * h / n.norm_squared()
+        }
+    }
+}
+
+/// The point of triangle `t` closest to `p` (of a zero-area triangle: of its edges).
+fn triangle_closest(t: &Triangle, p: &Vec3) -> Vec3 {
+    let v = &t.v;
+    let on_edge = |&(i, j): &(usize, usize)| segment_closest(p, &v[i], &v[j]);
+    if t.flat {
+        return EDGES
+            .iter()
+            .map(on_edge)
+            .min_by(|x, y| (p - x).norm_squared().total_cmp(&(p - y).norm_squared()))
+            .unwrap_or(v[0]);
+    }
+    match closest_feature(t, p) {
+        Feature::Corner(i) => v[i],
+        Feature::Edge(i, j) => on_edge(&(i, j)),
+        Feature::Face => {
+            let n = (v[1] - v[0]).cross(&(v[2] - v[0]));
+            p - n * ((p - v[0]).dot(&n) / n.norm_squared())
+        }
+    }
 }
 
 /// ∫_T (x−c)(x−c)ᵀ dA / area for triangle `t`: (Σ dᵢdᵢᵀ + S Sᵀ)/12 with dᵢ = vᵢ − c
@@ -524,26 +573,45 @@ impl SurfaceIndex {
 
     /// Unsigned distance from `p` to the closest point of the surface (exact point-triangle distance, BVH-pruned), metres.
     pub fn distance(&self, p: [f32; 3]) -> f32 {
-        let p = to_vec3(p);
-        let mut best2 = f64::INFINITY;
+        self.nearest_triangle(&to_vec3(p))
+            .map_or(f64::INFINITY, |(_, d2)| d2)
+            .sqrt() as f32
+    }
+
+    /// The point of the surface closest to `p` (none for an empty mesh).
+    pub fn closest_point(&self, p: [f32; 3]) -> Option<[f32; 3]> {
+        let q = to_vec3(p);
+        self.nearest_triangle(&q).map(|(t, _)| {
+            let c = triangle_closest(&self.triangles[t], &q);
+            [c.x as f32, c.y as f32, c.z as f32]
+        })
+    }
+
+    /// The triangle closest to `p` and its squared distance.
+    fn nearest_triangle(&self, p: &Vec3) -> Option<(usize, f64)> {
+        let mut best: Option<(usize, f64)> = None;
+        let best2 = |b: &Option<(usize, f64)>| b.map_or(f64::INFINITY, |(_, d2)| d2);
         let mut stack: Vec<(u32, f64)> = Vec::with_capacity(64);
         if let Some(root) = self.root() {
-            stack.push(self.child_with_bound(root, &p));
+            stack.push(self.child_with_bound(root, p));
         }
         while let Some((i, bound2)) = stack.pop() {
-            if bound2 >= best2 {
+            if bound2 >= best2(&best) {
                 continue;
             }
             let node = &self.nodes[i as usize];
             match node.children {
                 None => {
-                    for t in self.leaf_triangles(node) {
-                        best2 = best2.min(triangle_distance2(t, &p));
+                    for (k, t) in self.leaf_triangles(node).iter().enumerate() {
+                        let d2 = triangle_distance2(t, p);
+                        if d2 < best2(&best) {
+                            best = Some((node.start as usize + k, d2));
+                        }
                     }
                 }
                 Some((left, right)) => {
-                    let near = self.child_with_bound(left, &p);
-                    let far = self.child_with_bound(right, &p);
+                    let near = self.child_with_bound(left, p);
+                    let far = self.child_with_bound(right, p);
                     let (near, far) = if far.1 < near.1 {
                         (far, near)
                     } else {
@@ -551,14 +619,14 @@ impl SurfaceIndex {
                     };
                     // Push the farther child first so the nearer one is searched first.
                     for child in [far, near] {
-                        if child.1 < best2 {
+                        if child.1 < best2(&best) {
                             stack.push(child);
                         }
                     }
                 }
             }
         }
-        best2.sqrt() as f32
+        best
     }
 
     /// For many points in parallel (rayon): (winding number, distance) for each.
@@ -963,7 +1031,13 @@ mod tests {
                 (d - expected).abs() < 1e-6,
                 "distance {d} vs {expected} at {p:?}"
             );
+            let c = index.closest_point(p).map(to_vec3);
+            assert!(
+                c.is_some_and(|c| (c - Vec3::from(nearest)).norm() < 1e-6),
+                "closest point {c:?} vs {nearest:?} at {p:?}"
+            );
         }
+        assert_eq!(SurfaceIndex::new(&[], &[]).closest_point([0.0; 3]), None);
         // A lattice sweep reaches every Voronoi region of every triangle (faces,
         // cube edges, face diagonals, corners): outside, the nearest point is the
         // clamp to the cube; inside, the nearest face.

@@ -42,7 +42,7 @@ pub const STRAIN_ITERATIONS: usize = 20;
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum Solver {
-    /// Push the crossing vertices out, keep the edges around them (plain arrays, ~1 ms).
+    /// Push the crossing vertices out, keep the edges around them (plain arrays, ~5 ms).
     #[default]
     Projection,
     /// The paper's Adam fit of a UV displacement map through libtorch (~100 ms).
@@ -258,7 +258,8 @@ pub fn roll_out(
         let clock = Instant::now();
         let (mut before, mut after, mut iterations) = (0.0, 0.0, 0);
         if settings.collision_fix || settings.measure_collisions {
-            let planes = Planes::of(&points, &PosedSurface::new(body, pose)?);
+            let surface = PosedSurface::new(body, pose)?;
+            let planes = Planes::of(&points, &surface);
             before = planes.loss(&points, settings.margin);
             after = before;
             if settings.collision_fix && before > settings.threshold {
@@ -284,6 +285,8 @@ pub fn roll_out(
                         points = to_points(&fixed);
                     }
                 }
+                // The planes miss where a vertex's nearest body vertex is on another limb.
+                surface.lift_inside(&mut points, &planes, settings.margin);
                 after = planes.loss(&points, settings.margin);
             }
         }
