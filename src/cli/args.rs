@@ -118,7 +118,7 @@ pub struct CollisionFixArgs {
     /// keeps the edges around them (plain arrays, ~5 ms a frame); `paper` is the paper's Adam
     /// fit of a UV displacement map through libtorch (~100 ms a frame). Either way, vertices
     /// still inside the body after it (by winding number: where the nearest body vertex is on
-    /// another limb) are put just outside the closest point of the body (~8 ms a frame).
+    /// another limb) are put just outside the closest point of the body (~9 ms a frame).
     #[arg(long, value_enum, default_value_t = crate::rollout::Solver::Projection)]
     pub collision_solver: crate::rollout::Solver,
     /// Passes of the projection fix, or Adam iterations of the paper's (default 8 and 20).

@@ -210,23 +210,25 @@ fn triangle_distance2(t: &Triangle, p: &Vec3) -> f64 {
     }
 }
 
-/// The point of triangle `t` closest to `p` (of a zero-area triangle: of its edges).
-fn triangle_closest(t: &Triangle, p: &Vec3) -> Vec3 {
+/// The point of triangle `t` closest to `p` (of a zero-area triangle: of its edges), and whether
+/// it lies inside the face (not on an edge or a corner).
+fn triangle_closest(t: &Triangle, p: &Vec3) -> (Vec3, bool) {
     let v = &t.v;
     let on_edge = |&(i, j): &(usize, usize)| segment_closest(p, &v[i], &v[j]);
     if t.flat {
-        return EDGES
+        let c = EDGES
             .iter()
             .map(on_edge)
             .min_by(|x, y| (p - x).norm_squared().total_cmp(&(p - y).norm_squared()))
             .unwrap_or(v[0]);
+        return (c, false);
     }
     match closest_feature(t, p) {
-        Feature::Corner(i) => v[i],
-        Feature::Edge(i, j) => on_edge(&(i, j)),
+        Feature::Corner(i) => (v[i], false),
+        Feature::Edge(i, j) => (on_edge(&(i, j)), false),
         Feature::Face => {
             let n = (v[1] - v[0]).cross(&(v[2] - v[0]));
-            p - n * ((p - v[0]).dot(&n) / n.norm_squared())
+            (p - n * ((p - v[0]).dot(&n) / n.norm_squared()), true)
         }
     }
 }
@@ -493,6 +495,18 @@ impl Expansion {
     }
 }
 
+/// The point of a surface closest to a query point ([`SurfaceIndex::closest`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Closest {
+    pub point: [f32; 3],
+    /// The unit normal of the closest triangle (outwards for counter-clockwise triangles).
+    pub normal: [f32; 3],
+    /// Whether the closest point lies inside the triangle's face, not on an edge or a corner:
+    /// then the side of the face's plane is the side of the surface (for a closed surface that
+    /// does not cross itself), with no winding number to sum.
+    pub on_face: bool,
+}
+
 /// A BVH over a posed triangle mesh answering winding-number and distance queries fast.
 #[derive(Clone, Debug)]
 pub struct SurfaceIndex {
@@ -580,10 +594,24 @@ impl SurfaceIndex {
 
     /// The point of the surface closest to `p` (none for an empty mesh).
     pub fn closest_point(&self, p: [f32; 3]) -> Option<[f32; 3]> {
+        self.closest(p).map(|c| c.point)
+    }
+
+    /// The point of the surface closest to `p`, its triangle's normal and whether it lies inside
+    /// that triangle's face (none for an empty mesh).
+    pub fn closest(&self, p: [f32; 3]) -> Option<Closest> {
         let q = to_vec3(p);
-        self.nearest_triangle(&q).map(|(t, _)| {
-            let c = triangle_closest(&self.triangles[t], &q);
-            [c.x as f32, c.y as f32, c.z as f32]
+        self.nearest_triangle(&q).map(|(i, _)| {
+            let t = &self.triangles[i];
+            let (c, on_face) = triangle_closest(t, &q);
+            let n = (t.v[1] - t.v[0]).cross(&(t.v[2] - t.v[0]));
+            let n = n / n.norm().max(f64::MIN_POSITIVE);
+            let f = |v: Vec3| [v.x as f32, v.y as f32, v.z as f32];
+            Closest {
+                point: f(c),
+                normal: f(n),
+                on_face,
+            }
         })
     }
 

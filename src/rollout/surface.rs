@@ -55,10 +55,16 @@ impl<'a> PosedSurface<'a> {
             .par_iter()
             .filter_map(|&v| {
                 let p = garment[v];
-                if !surface.is_inside(p) {
+                let closest = surface.closest(p)?;
+                let c = closest.point;
+                // Beside a face, its side answers; by an edge or a corner, the winding number.
+                let outside = match closest.on_face {
+                    true => offset(p, c, closest.normal) > 0.0,
+                    false => !surface.is_inside(p),
+                };
+                if outside {
                     return None;
                 }
-                let c = surface.closest_point(p)?;
                 let out = margin / distance(p, c).max(f32::MIN_POSITIVE);
                 Some((v, std::array::from_fn(|k| c[k] + out * (c[k] - p[k]))))
             })
