@@ -1066,6 +1066,16 @@ mod tests {
             );
         }
         assert_eq!(SurfaceIndex::new(&[], &[]).closest_point([0.0; 3]), None);
+        // Beside a face: on it, with the face's outward normal; beside an edge or a corner: not.
+        let face = index.closest([0.5, 0.97, 0.4]).unwrap();
+        assert!(face.on_face && face.normal == [0.0, 1.0, 0.0], "{face:?}");
+        let outside = index.closest([0.5, 0.4, -0.2]).unwrap();
+        assert!(
+            outside.on_face && outside.normal == [0.0, 0.0, -1.0],
+            "{outside:?}"
+        );
+        assert!(!index.closest([1.2, 1.1, 0.5]).unwrap().on_face);
+        assert!(!index.closest([1.1, 1.2, 1.3]).unwrap().on_face);
         // A lattice sweep reaches every Voronoi region of every triangle (faces,
         // cube edges, face diagonals, corners): outside, the nearest point is the
         // clamp to the cube; inside, the nearest face.

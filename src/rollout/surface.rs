@@ -39,9 +39,9 @@ impl<'a> PosedSurface<'a> {
     }
 
     /// The fix's last word where its planes were wrong: garment vertices left within
-    /// [`INSIDE_REACH`] of their plane and inside the body (winding number over the posed
-    /// triangles) are put `margin` outside the closest point of the surface. Returns how many
-    /// moved.
+    /// [`INSIDE_REACH`] of their plane and inside the body (the side of the closest face, or
+    /// by an edge or a corner the winding number of the posed triangles) are put `margin`
+    /// outside the closest point of the surface. Returns how many moved.
     pub fn lift_inside(&self, garment: &mut [[f32; 3]], planes: &Planes, margin: f32) -> usize {
         use rayon::prelude::*;
         let near: Vec<usize> = (0..garment.len())
