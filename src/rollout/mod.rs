@@ -186,16 +186,35 @@ pub fn roll_out(
     let bodies = BodyFrames::new(body, anchors, poses, device);
     let drives = model.clip_drives(&bodies, fps)?;
     let at = |f: usize| bodies.select(&Tensor::from_slice(&[f as i64]).to_device(device));
+    let limit = StrainLimit::new(garment.rest, garment.triangles, garment.pinned);
     let start: Vec<Vec<[f32; 3]>> = match init {
-        Init::Rest => vec![tch::no_grad(|| {
-            to_points(&space.skin(&space.consts.rest.unsqueeze(0), &at(first).transforms))
-        })],
+        Init::Rest => {
+            let mut rest = tch::no_grad(|| {
+                to_points(&space.skin(&space.consts.rest.unsqueeze(0), &at(first).transforms))
+            });
+            // The rest garment skinned on a first pose far from rest can cross the body
+            // (hundreds of vertices on a seated start): the first frame is fixed as every other.
+            if settings.collision_fix {
+                let surface = PosedSurface::new(body, &poses[first])?;
+                let planes = Planes::of(&rest, &surface);
+                let iterations = Solver::Projection.default_iterations();
+                contact::push_out(
+                    &mut rest,
+                    &planes,
+                    &limit,
+                    settings.margin,
+                    settings.strain_band,
+                    iterations,
+                );
+                surface.lift_inside(&mut rest, &planes, settings.margin);
+            }
+            vec![rest]
+        }
         Init::Moving(frames) => frames[frames.len().saturating_sub(HISTORY)..].to_vec(),
     };
     let Some(initial) = start.last().cloned() else {
         bail!("the roll-out's start has no garment");
     };
-    let limit = StrainLimit::new(garment.rest, garment.triangles, garment.pinned);
     let shape = (settings.solver == Solver::Paper).then(|| ShapeTerms {
         laplacian: MeshLaplacian::new(garment.triangles, initial.len(), device),
         edges: MeshEdges::new(garment.triangles, device),
