@@ -193,11 +193,15 @@ pub fn roll_out(
                 to_points(&space.skin(&space.consts.rest.unsqueeze(0), &at(first).transforms))
             });
             // The rest garment skinned on a first pose far from rest can cross the body
-            // (hundreds of vertices on a seated start): the first frame is fixed as every other.
+            // (hundreds of vertices on a seated start): the first frame is fixed too, by
+            // projection whatever the solver (the paper's fits a decoded frame; this is none).
             if settings.collision_fix {
                 let surface = PosedSurface::new(body, &poses[first])?;
                 let planes = Planes::of(&rest, &surface);
-                let iterations = Solver::Projection.default_iterations();
+                let iterations = match settings.solver {
+                    Solver::Projection => settings.iterations,
+                    Solver::Paper => Solver::Projection.default_iterations(),
+                };
                 contact::push_out(
                     &mut rest,
                     &planes,
