@@ -49,8 +49,9 @@ pub struct Args {
     pub clips: super::args::MotionArgs,
     /// Where the roll-out starts: `rest` or a point cache whose first frame is the start.
     ///
-    /// `rest`: the rest garment on the first pose, at rest; a point cache: its first frame is the
-    /// starting garment (e.g. the clip's simulation).
+    /// `rest`: the rest garment on the first pose, at rest (pushed out of the body by the
+    /// collision fix, like every frame); a point cache: its first frame is the starting garment
+    /// as it is (e.g. the clip's simulation).
     #[arg(long, default_value = "rest", help_heading = "Inputs")]
     pub init: String,
     /// Play only the first N frames (of the clips in a row).
