@@ -1,10 +1,13 @@
-//! Loading motion clips onto a skeleton: read the BVH, resolve its joint names, retarget.
+//! Loading motion clips onto a body: read the BVH, resolve its joint names, retarget onto its
+//! skeleton, its feet on the floor.
 
+use crate::body::Body;
 use crate::io::bvh::Bvh;
 use crate::io::joint_map::{self, ClipJoints, JointMap};
 use crate::rig::capture::ClipAxes;
+use crate::rig::ground::Feet;
 use crate::rig::retarget::{check_drive, retarget, JointFate, JointMapping, Retargeted};
-use crate::rig::{JointTransform, Skeleton};
+use crate::rig::JointTransform;
 use anyhow::{bail, Result};
 use std::path::Path;
 
@@ -46,10 +49,10 @@ pub struct JointFateLine {
 pub fn clip_joint_fates(
     path: &Path,
     reader: &ClipReader,
-    skeleton: &Skeleton,
+    body: &Body,
 ) -> Result<(Retargeted, Vec<JointFateLine>)> {
     let bvh = Bvh::read(path)?;
-    let (clip, mapping) = retarget_bvh(path, &bvh, reader, skeleton)?;
+    let (clip, mapping) = retarget_bvh(path, &bvh, reader, body)?;
     let lines = mapping
         .fates
         .iter()
@@ -57,7 +60,7 @@ pub fn clip_joint_fates(
         .map(|(fate, j)| JointFateLine {
             joint: j.name.clone(),
             became: match fate {
-                JointFate::Mapped { rig } => skeleton.joint_names[*rig].clone(),
+                JointFate::Mapped { rig } => body.skeleton.joint_names[*rig].clone(),
                 JointFate::Folded { into, explicit } => format!(
                     "folded into {}{}",
                     into.map_or("the root (turns the whole clip)", |k| bvh.joints[k]
@@ -85,16 +88,16 @@ pub fn suggest_map(path: &Path) -> Result<crate::io::map_suggest::Suggestion> {
     )?)
 }
 
-/// A clip retargeted onto `skeleton`, optionally resampled to `fps` (an integer divisor of the
+/// A clip retargeted onto `body`'s skeleton, optionally resampled to `fps` (an integer divisor of the
 /// source rate: frames are kept, never interpolated).
 pub fn load_clip(
     path: &Path,
     reader: &ClipReader,
-    skeleton: &Skeleton,
+    body: &Body,
     fps: Option<f32>,
 ) -> Result<Retargeted> {
     let bvh = Bvh::read(path)?;
-    let (mut clip, _) = retarget_bvh(path, &bvh, reader, skeleton)?;
+    let (mut clip, _) = retarget_bvh(path, &bvh, reader, body)?;
     // Every command that reads a clip says how: a wrong up axis or unit is found here, not in
     // a garment through the floor.
     crate::progress::note(&format!(
@@ -122,8 +125,9 @@ fn retarget_bvh(
     path: &Path,
     bvh: &Bvh,
     reader: &ClipReader,
-    skeleton: &Skeleton,
+    body: &Body,
 ) -> Result<(Retargeted, JointMapping)> {
+    let skeleton = &body.skeleton;
     if bvh.frame_count() < 2 {
         bail!(
             "{}: needs at least 2 frames, has {}",
@@ -144,7 +148,15 @@ fn retarget_bvh(
     let resolved = joint_map::resolve(&path.display().to_string(), joints, &rig, &reader.maps)?;
     check_drive(&resolved, skeleton)
         .map_err(|e| anyhow::anyhow!("{}: map '{}': {e}", path.display(), resolved.map_name))?;
-    let clip = retarget(&bvh.capture(), &resolved, skeleton, &name, reader.axes);
+    let feet = Feet::of(skeleton, &body.mesh().positions, &body.skin);
+    let clip = retarget(
+        &bvh.capture(),
+        &resolved,
+        skeleton,
+        &feet,
+        &name,
+        reader.axes,
+    );
     Ok((clip, resolved))
 }
 

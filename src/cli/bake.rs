@@ -153,7 +153,7 @@ impl Execute for Args {
             .motion
             .motions
             .iter()
-            .map(|p| load_clip(p, &maps, model.skeleton(), fps).map(|c| c.animation))
+            .map(|p| load_clip(p, &maps, &model.body, fps).map(|c| c.animation))
             .collect::<Result<Vec<_>>>()?;
         let targets = Targets::from_flags(self.max_targets, self.tolerance_mm, Targets::Full)?;
         let opts = BakeOptions {

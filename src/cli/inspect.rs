@@ -111,7 +111,7 @@ fn bvh_report(path: &Path, args: &Args) -> Result<Value> {
                 up: args.up,
                 units: args.units,
             });
-        let (clip, fates) = crate::motion::clip_joint_fates(path, &reader, &body.skeleton)?;
+        let (clip, fates) = crate::motion::clip_joint_fates(path, &reader, &body)?;
         report["map"] = json!(clip.reading.describe(&clip.map_name));
         report["reading"] = json!(clip.reading);
         report["joints"] = json!(fates

@@ -85,7 +85,7 @@ impl Execute for Args {
         let (file, _device) = crate::pipeline::load_model(&self.compute.compute(), &self.model)?;
         let fps = file.info.dynamic()?.fps;
         let clips = self.clips.clips(None);
-        let (motion, clip) = clips.load_single_at(&file.body.skeleton, Some(fps))?;
+        let (motion, clip) = clips.load_single_at(&file.body, Some(fps))?;
         let clip = clip.animation;
         let sim = read_pc2(&self.sim, file.garment.vertex_count())?;
         // A simulation of the clip's first frames (`simulate --frames N`) is enough.

@@ -81,7 +81,7 @@ impl Execute for Args {
         );
         for path in motions {
             bar.inc(1);
-            let clip = load_clip(path, &reader, &body.skeleton, self.clips.fps)?;
+            let clip = load_clip(path, &reader, &body, self.clips.fps)?;
             let a = &clip.animation;
             let r = ClipReport {
                 clip: path.clone(),

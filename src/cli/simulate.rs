@@ -143,7 +143,7 @@ impl Execute for Args {
         }
         let fabric = self.fabric.load()?;
         let clips = self.clips.clips();
-        let (motion, clip) = clips.load_single(&body.skeleton)?;
+        let (motion, clip) = clips.load_single(&body)?;
         let mut settings = self.settings()?;
         settings.blender = simulate::blender::find(self.blender.as_deref())?;
         let scene = Scene {

@@ -108,7 +108,7 @@ impl Args {
             None,
         );
         let fps = crate::models::swing::clip_rate(model.pbns()?, self.fps)?;
-        let (_, clip) = clips.load_single_at(model.skeleton(), fps)?;
+        let (_, clip) = clips.load_single_at(&model.body, fps)?;
         Ok(Some(Reference::of(&model, &clip.animation, device)?))
     }
 }

@@ -60,7 +60,7 @@ pub fn run(request: &Request, say: &dyn Fn(&str)) -> Result<Report> {
         .clips
         .motions
         .iter()
-        .map(|p| load_clip(p, &reader, model.skeleton(), fps).map(|c| c.animation))
+        .map(|p| load_clip(p, &reader, &model.body, fps).map(|c| c.animation))
         .collect::<Result<Vec<_>>>()?;
     let load_s = clock.elapsed().as_secs_f64();
     let opts = BakeOptions {

@@ -72,11 +72,7 @@ pub fn run(request: &Request, feedback: &Feedback) -> Result<RolloutTimes> {
             file.garment.vertex_count()
         );
     }
-    let clip = r
-        .clips
-        .load_single_at(&body.skeleton, Some(fps))?
-        .1
-        .animation;
+    let clip = r.clips.load_single_at(&body, Some(fps))?.1.animation;
     let n = r.frames.max(2).min(clip.frame_count());
     let poses: Vec<_> = (0..n).map(|f| clip.local_pose(f)).collect();
     let (say, hide_bar) = (feedback.say, feedback.hide_bars);

@@ -81,7 +81,7 @@ pub fn run(request: &Request) -> Result<Report> {
     let body = read_body(&r.body)?;
     let garment = Garment::read(&r.garment)?;
     let n = garment.mesh.vertex_count();
-    let (motion, clip) = r.clips.load_single(&body.skeleton)?;
+    let (motion, clip) = r.clips.load_single(&body)?;
     let fps = clip.animation.fps;
     let clip_frames = clip.animation.frame_count();
     let played = r.frames.unwrap_or(clip_frames);

@@ -147,7 +147,7 @@ pub fn run(request: &Request, outputs: OutputSet) -> Result<Report> {
         None => model.body.clone(),
     };
     let fps = crate::models::swing::clip_rate(model.pbns()?, r.clips.fps)?;
-    let (motion, clip) = r.clips.load_single_at(&body.skeleton, fps)?;
+    let (motion, clip) = r.clips.load_single_at(&body, fps)?;
     let anim = &clip.animation;
     let poses: Vec<_> = (0..anim.frame_count())
         .map(|f| anim.local_pose(f))

@@ -67,25 +67,25 @@ impl Clips {
         )
     }
 
-    /// The one clip of a step that reads exactly one, retargeted onto `skeleton` at `fps`.
+    /// The one clip of a step that reads exactly one, retargeted onto `body` at `fps`.
     pub fn load_single(
         &self,
-        skeleton: &crate::rig::Skeleton,
+        body: &crate::body::Body,
     ) -> Result<(&Path, crate::rig::retarget::Retargeted)> {
-        self.load_single_at(skeleton, self.fps)
+        self.load_single_at(body, self.fps)
     }
 
     /// [`Clips::load_single`] at the rate `fps` (a model's own rate: see
     /// [`crate::models::swing::clip_rate`]).
     pub fn load_single_at(
         &self,
-        skeleton: &crate::rig::Skeleton,
+        body: &crate::body::Body,
         fps: Option<f32>,
     ) -> Result<(&Path, crate::rig::retarget::Retargeted)> {
         let motion = self.single()?;
         Ok((
             motion,
-            crate::motion::load_clip(motion, &self.reader()?, skeleton, fps)?,
+            crate::motion::load_clip(motion, &self.reader()?, body, fps)?,
         ))
     }
 

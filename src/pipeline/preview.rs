@@ -2,6 +2,7 @@
 //! point caches or posed by a PBNS model (beside plain LBS), picked frames, laid out per view
 //! (`preview::layout`).
 
+use crate::body::Body;
 use crate::eval::model_frames;
 use crate::garment::Garment;
 use crate::io::gltf_body::read_body;
@@ -9,7 +10,7 @@ use crate::models::file::{self, check_skeleton};
 use crate::motion::{chain, load_clip};
 use crate::preview::layout::{shots_sheet, Drawn, Layout, Shot};
 use crate::preview::View;
-use crate::rig::{JointTransform, Skeleton};
+use crate::rig::JointTransform;
 use anyhow::{bail, Result};
 use std::path::PathBuf;
 
@@ -81,7 +82,7 @@ pub fn sheet(args: &Request) -> Result<(image::RgbImage, usize)> {
         if garments.len() != args.caches.len() {
             bail!("with --motion each --garment needs its --cache (a point cache from simulate or eval), or a trained model: --model");
         }
-        let (fps, sequence) = played(args, &body.skeleton)?;
+        let (fps, sequence) = played(args, &body)?;
         // Evenly spaced frames cover what every cache holds.
         let start = if caches.is_empty() {
             0
@@ -218,13 +219,13 @@ fn frame_label(fps: f32, frame: usize) -> String {
 }
 
 /// The --motion clips' poses one after another (`motion::chain`) and their shared rate.
-fn played(args: &Request, skeleton: &Skeleton) -> Result<(f32, Vec<Vec<JointTransform>>)> {
+fn played(args: &Request, body: &Body) -> Result<(f32, Vec<Vec<JointTransform>>)> {
     let reader = args.clips.reader()?;
     let clips = args
         .clips
         .motions
         .iter()
-        .map(|m| Ok(load_clip(m, &reader, skeleton, args.clips.fps)?.animation))
+        .map(|m| Ok(load_clip(m, &reader, body, args.clips.fps)?.animation))
         .collect::<Result<Vec<_>>>()?;
     let fps = clips.first().map_or(30.0, |c| c.fps);
     if let Some((m, c)) = args

@@ -5,6 +5,7 @@
 //! out).
 
 use super::{Clips, Feedback};
+use crate::body::Body;
 use crate::compute::Compute;
 use crate::garment::Garment;
 use crate::io::gltf_body::read_body;
@@ -12,7 +13,6 @@ use crate::metrics::deviation::Deviation;
 use crate::models::dynamic::SpaceShape;
 use crate::models::dynamic::{BodyAnchors, MotionShape};
 use crate::models::file::{DynamicEpoch, ModelFile, MotionEpoch, RolloutRound, Settled};
-use crate::rig::Skeleton;
 use crate::rollout::{for_model, Init, Settings as RolloutSettings};
 use crate::train::dynamic::{deviation, FrameData, Sequence, Settings, SpaceTrainer};
 use crate::train::motion::{
@@ -191,7 +191,7 @@ fn sequences(
     motions: &[PathBuf],
     sims: &[PathBuf],
     clips: &Clips,
-    skeleton: &Skeleton,
+    body: &Body,
     vertices: usize,
 ) -> Result<Vec<Sequence>> {
     if motions.len() != sims.len() {
@@ -205,7 +205,7 @@ fn sequences(
     motions
         .iter()
         .zip(sims)
-        .map(|(m, s)| Sequence::load(m, s, &reader, skeleton, clips.fps, vertices))
+        .map(|(m, s)| Sequence::load(m, s, &reader, body, clips.fps, vertices))
         .collect()
 }
 
@@ -227,14 +227,8 @@ impl Request {
         )?;
         let fabric = crate::fabric::Fabric::load(&self.fabric)?;
         let n = garment.mesh.vertex_count();
-        let train = sequences(
-            &self.clips.motions,
-            &self.sims,
-            &self.clips,
-            &body.skeleton,
-            n,
-        )?;
-        let eval = self.eval_sequence(&body.skeleton, n)?;
+        let train = sequences(&self.clips.motions, &self.sims, &self.clips, &body, n)?;
+        let eval = self.eval_sequence(&body, n)?;
         let mut shape = SpaceShape::preset(&self.preset)?;
         shape.latent = self.latent.unwrap_or(shape.latent);
         let mut settings = Settings::new(shape);
@@ -307,13 +301,7 @@ impl Request {
             bail!("--resume: no checkpoint next to {}", self.out.display());
         }
         let n = file.garment.vertex_count();
-        let train = sequences(
-            &self.clips.motions,
-            &self.sims,
-            &self.clips,
-            &file.body.skeleton,
-            n,
-        )?;
+        let train = sequences(&self.clips.motions, &self.sims, &self.clips, &file.body, n)?;
         if let Some(s) = train.iter().find(|s| (s.clip.fps - info.fps).abs() > 1e-3) {
             bail!(
                 "{} plays at {} fps, the space was trained at {} fps: give --fps {}",
@@ -323,7 +311,7 @@ impl Request {
                 info.fps
             );
         }
-        let eval = self.eval_sequence(&file.body.skeleton, n)?;
+        let eval = self.eval_sequence(&file.body, n)?;
         let data = FrameData::new(&file.body, &self.anchors(&file)?, &train, device);
         let frames = data.len();
         say(&format!(
@@ -537,13 +525,13 @@ impl Request {
         }
     }
 
-    fn eval_sequence(&self, skeleton: &Skeleton, vertices: usize) -> Result<Option<Sequence>> {
+    fn eval_sequence(&self, body: &Body, vertices: usize) -> Result<Option<Sequence>> {
         Ok(match &self.eval {
             Some((m, s)) => sequences(
                 std::slice::from_ref(m),
                 std::slice::from_ref(s),
                 &self.clips,
-                skeleton,
+                body,
                 vertices,
             )?
             .pop(),

@@ -8,11 +8,12 @@
 //! below, so joints a map leaves out cost nothing. At each frame the body joint's world rotation
 //! is then `G_clip · G_rest⁻¹ · F · B_rest`: the clip joint's turn since its rest, applied to the
 //! body's bone as fitted. The root translation is scaled by the ratio of hip heights, and a
-//! vertical offset puts the stance feet on y = 0.
+//! vertical offset puts the lowest skinned foot vertex on the rest pose's floor ([`super::ground`]).
 
 use super::capture::{
     detect_up, CaptureClip, ClipAxes, Found, JointWorld, RootOffset, Units, UpAxis,
 };
+use super::ground::{ground, Feet};
 use super::{SkelAnimation, Skeleton};
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use serde::Serialize;
@@ -192,11 +193,12 @@ pub fn check_drive(map: &JointMapping, skeleton: &Skeleton) -> Result<(), DriveE
 }
 
 /// Retargets every frame of `clip` onto `skeleton` through the joint mapping (checked with
-/// [`check_drive`] first).
+/// [`check_drive`] first), the body's `feet` put on the floor.
 pub fn retarget(
     clip: &CaptureClip,
     map: &JointMapping,
     skeleton: &Skeleton,
+    feet: &Feet,
     name: &str,
     axes: ClipAxes,
 ) -> Retargeted {
@@ -233,7 +235,7 @@ pub fn retarget(
         translations,
         rotations,
     };
-    let floor_offset = ground(&mut animation, skeleton);
+    let floor_offset = ground(&mut animation, skeleton, feet);
     let (joints_mapped, joints_folded, joints_dropped) = map.counts();
     Retargeted {
         animation,
@@ -622,52 +624,4 @@ fn hip_height(pos: &[Vector3<f64>], mapped: Option<&[Option<usize>]>) -> f64 {
     };
     let lowest = ids.iter().map(|&i| pos[i].y).fold(f64::INFINITY, f64::min);
     root_y - lowest
-}
-
-/// Foot contact: per frame, how far the feet sit above (+) or below (−) their rest height, taking
-/// for each frame the foot joint closest to its rest height (heel strike: the ankle; tiptoe: the
-/// toe). Foot joints are those within 12 cm of the lowest joint at rest.
-fn foot_clearance(anim: &SkelAnimation, skeleton: &Skeleton) -> Vec<f32> {
-    let rest: Vec<f32> = skeleton.rest_world().iter().map(|m| m[(1, 3)]).collect();
-    let lowest = rest.iter().copied().fold(f32::INFINITY, f32::min);
-    let feet: Vec<usize> = (0..rest.len())
-        .filter(|&j| rest[j] < lowest + 0.12)
-        .collect();
-    (0..anim.frame_count())
-        .map(|f| {
-            let pos = anim.joint_positions(skeleton, f);
-            feet.iter()
-                .map(|&j| pos[j].y - rest[j])
-                .fold(f32::INFINITY, f32::min)
-        })
-        .collect()
-}
-
-/// Puts the feet on the floor: a constant offset (10th percentile of the clearance, robust to
-/// jumps; the 1st when the take climbs), then a per-frame correction of what remains while the feet are near the floor (full
-/// within 5 cm, fading out by 15 cm so jumps stay jumps), smoothed over ±0.1 s. Other proportions
-/// than the performer's (a wide stance lowers their hips less than ours) otherwise float the feet.
-fn ground(anim: &mut SkelAnimation, skeleton: &Skeleton) -> f32 {
-    let clearance = foot_clearance(anim, skeleton);
-    if clearance.is_empty() {
-        return 0.0;
-    }
-    let mut sorted = clearance.clone();
-    sorted.sort_by(f32::total_cmp);
-    // A take spent mostly on something higher (a climb, a playground structure) has its 10th
-    // percentile up there: when the lowest 1 % lies more than 10 cm below it, the floor is there.
-    let (p1, p10) = (sorted[sorted.len() / 100], sorted[sorted.len() / 10]);
-    let offset = if p1 < p10 - 0.10 { -p1 } else { -p10 };
-    let residual: Vec<f32> = clearance.iter().map(|c| c + offset).collect();
-    let correction: Vec<f32> = residual.iter().map(|&r| -r * contact_weight(r)).collect();
-    let half = (0.1 * anim.fps).round() as usize;
-    for (f, t) in anim.translations.iter_mut().enumerate() {
-        let window = &correction[f.saturating_sub(half)..(f + half + 1).min(correction.len())];
-        t[0].y += offset + window.iter().sum::<f32>() / window.len() as f32;
-    }
-    offset
-}
-
-fn contact_weight(residual: f32) -> f32 {
-    ((0.15 - residual.abs()) / 0.10).clamp(0.0, 1.0)
 }

@@ -37,17 +37,17 @@ pub struct Sequence {
 }
 
 impl Sequence {
-    /// A clip (`motion`, retargeted onto `skeleton` at `fps`) and its simulation (`sim`, a point
+    /// A clip (`motion`, retargeted onto `body` at `fps`) and its simulation (`sim`, a point
     /// cache of `vertices` points per frame, no longer than the clip), named by the clip's file.
     pub fn load(
         motion: &Path,
         sim: &Path,
         maps: &crate::motion::ClipReader,
-        skeleton: &crate::rig::Skeleton,
+        body: &crate::body::Body,
         fps: Option<f32>,
         vertices: usize,
     ) -> Result<Sequence> {
-        let clip = crate::motion::load_clip(motion, maps, skeleton, fps)?.animation;
+        let clip = crate::motion::load_clip(motion, maps, body, fps)?.animation;
         let garment = crate::io::point_cache::read_pc2(sim, vertices)?;
         if garment.len() > clip.frame_count() {
             bail!(

@@ -181,7 +181,7 @@ impl Inputs {
         let mut clips = Vec::new();
         let mut motion_names = Vec::new();
         for m in files.motions {
-            clips.push(load_clip(m, files.reader, &body.skeleton, files.fps)?.animation);
+            clips.push(load_clip(m, files.reader, &body, files.fps)?.animation);
             motion_names.push(
                 m.file_name()
                     .map_or(String::new(), |n| n.to_string_lossy().into_owned()),

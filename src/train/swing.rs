@@ -116,7 +116,7 @@ impl Inputs {
         let mut clips = Vec::new();
         let mut motion_names = Vec::new();
         for m in motions {
-            clips.push(crate::motion::load_clip(m, reader, model.skeleton(), Some(fps))?.animation);
+            clips.push(crate::motion::load_clip(m, reader, &model.body, Some(fps))?.animation);
             motion_names.push(
                 m.file_name()
                     .map_or(String::new(), |n| n.to_string_lossy().into_owned()),

@@ -168,7 +168,7 @@ fn the_body_overlap_search_flags_what_its_definition_flags() {
     let clip = garmentbake::motion::load_clip(
         &sample("motions/131_02.bvh"),
         &Default::default(),
-        &body.skeleton,
+        &body,
         Some(30.0),
     )
     .unwrap();

@@ -46,7 +46,7 @@ fn threejs_skins_the_posed_body_like_our_lbs() {
     let clip = load_clip(
         &sample("motions/131_01.bvh"),
         &Default::default(),
-        &body.skeleton,
+        &body,
         None,
     )
     .unwrap()
@@ -77,7 +77,7 @@ fn blender_imports_and_plays_the_posed_body() {
     let clip = load_clip(
         &sample("motions/131_02.bvh"),
         &Default::default(),
-        &body.skeleton,
+        &body,
         None,
     )
     .unwrap()

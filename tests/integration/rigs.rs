@@ -217,8 +217,8 @@ fn a_character_creator_take_retargets_like_the_same_cmu_take() {
     let body = read_body(&sample("body.glb")).unwrap();
     let sk = &body.skeleton;
     let reader = Default::default();
-    let cmu = load_clip(&sample("motions/01_01.bvh"), &reader, sk, Some(60.0)).unwrap();
-    let cc = load_clip(&cc_take("001_01.bvh"), &reader, sk, Some(60.0)).unwrap();
+    let cmu = load_clip(&sample("motions/01_01.bvh"), &reader, &body, Some(60.0)).unwrap();
+    let cc = load_clip(&cc_take("001_01.bvh"), &reader, &body, Some(60.0)).unwrap();
     assert_eq!(cmu.map_name, "cmu_mb");
     assert_eq!(cc.map_name, "cc_base");
     eprintln!("01_01: {}", cmu.reading.describe(&cmu.map_name));
@@ -405,7 +405,7 @@ fn every_character_creator_take_poses_with_the_feet_on_the_floor() {
     let mut worst = (0.0f32, String::new());
     let (mut failed, mut flat) = (Vec::new(), Vec::new());
     for path in &takes {
-        let clip = load_clip(path, &Default::default(), sk, Some(30.0))
+        let clip = load_clip(path, &Default::default(), &body, Some(30.0))
             .unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
         let name = path.file_name().unwrap().to_string_lossy().into_owned();
         assert_eq!(clip.map_name, "cc_base", "{name}");
@@ -477,8 +477,9 @@ fn every_character_creator_take_poses_with_the_feet_on_the_floor() {
         }
     }
     eprintln!("worst take {}: p95 {:.1} mm", worst.1, worst.0 * 1e3);
-    // Measured: 44 of the 52 flat-floor takes within 3 cm, the other 8 (dance, bending over,
-    // basketball shots) 3.6 to 6.0 cm: the aim of 3 cm on every take is not met yet.
+    // Measured (grounded on the skinned feet): 51 of the 52 flat-floor takes within 3 cm (p95
+    // 1.9–16.5 mm), 005_19 (ballet, 14 standing frames) at 53.3 mm. Grounded on the foot joints
+    // it was 44 of 52, the other 8 at 3.6–6.0 cm.
     let within = flat.iter().filter(|&&p| p < 0.03).count();
     eprintln!("{within} of {} flat-floor takes within 3 cm", flat.len());
     assert!(
@@ -486,7 +487,7 @@ fn every_character_creator_take_poses_with_the_feet_on_the_floor() {
         "beyond 7 cm (p95 of standing frames): {failed:?}"
     );
     assert!(
-        within * 10 >= flat.len() * 8,
+        within * 20 >= flat.len() * 19,
         "{within} of {} within 3 cm",
         flat.len()
     );

@@ -92,7 +92,7 @@ fn a_waist_band_on_a_walking_body_stays_outside_and_pins_follow_within_a_millime
     let clip = garmentbake::motion::load_clip(
         &sample("motions/01_01.bvh"),
         &Default::default(),
-        &body.skeleton,
+        &body,
         Some(30.0),
     )
     .unwrap();

@@ -53,7 +53,7 @@ fn play(model: &ModelFile) -> (Vec<Vec<[f32; 3]>>, Vec<nalgebra::Matrix4<f32>>) 
     let clip = garmentbake::motion::load_clip(
         &sample("motions/131_02.bvh"),
         &reader,
-        model.skeleton(),
+        &model.body,
         Some(30.0),
     )
     .unwrap()

@@ -242,7 +242,7 @@ fn network_cache(path: &Path, frames: usize, dx: f32) {
     let clip = garmentbake::motion::load_clip(
         &sample("motions/131_02.bvh"),
         &maps,
-        file.skeleton(),
+        &file.body,
         Some(10.0),
     )
     .unwrap();

@@ -96,7 +96,7 @@ pub fn run(request: &Request, outputs: OutputSet, feedback: &Feedback) -> Result
         .clips
         .motions
         .iter()
-        .map(|m| Ok(load_clip(m, &reader, skeleton, Some(fps))?.animation))
+        .map(|m| Ok(load_clip(m, &reader, &file.body, Some(fps))?.animation))
         .collect::<Result<Vec<_>>>()?;
     let mut poses = chain(&clips.iter().collect::<Vec<_>>(), r.fade);
     let clip_frames = poses.len();
