@@ -264,7 +264,7 @@ impl Inside {
 pub fn percentile(sorted: &[f32], q: f64) -> f64 {
     match sorted.len() {
         0 => 0.0,
-        n => sorted[((q * n as f64).ceil() as usize).clamp(1, n) - 1] as f64,
+        n => sorted[nearest_rank(n, q)] as f64,
     }
 }
 
@@ -274,10 +274,16 @@ pub fn percentile_unsorted(values: &mut [f32], q: f64) -> f64 {
     match values.len() {
         0 => 0.0,
         n => {
-            let rank = ((q * n as f64).ceil() as usize).clamp(1, n) - 1;
-            *values.select_nth_unstable_by(rank, f32::total_cmp).1 as f64
+            *values
+                .select_nth_unstable_by(nearest_rank(n, q), f32::total_cmp)
+                .1 as f64
         }
     }
+}
+
+/// The index of the nearest-rank `q` quantile among `n > 0` sorted values.
+fn nearest_rank(n: usize, q: f64) -> usize {
+    ((q * n as f64).ceil() as usize).clamp(1, n) - 1
 }
 
 /// Per-vertex distance (mm) between two frames of one garment.

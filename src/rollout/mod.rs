@@ -15,7 +15,7 @@ pub mod timing;
 use crate::body::Body;
 use crate::geometry::StrainLimit;
 use crate::models::dynamic::motion::History;
-use crate::models::dynamic::{BodyAnchors, BodyFrames, Dynamic, MeshEdges, MeshLaplacian};
+use crate::models::dynamic::{BodyAnchors, BodyFrames, Dynamic, MeshEdges, MeshLaplacian, Space};
 use crate::models::file::ModelFile;
 use crate::rig::JointTransform;
 use anyhow::{bail, Result};
@@ -187,31 +187,15 @@ pub fn roll_out(
     let drives = model.clip_drives(&bodies, fps)?;
     let at = |f: usize| bodies.select(&Tensor::from_slice(&[f as i64]).to_device(device));
     let limit = StrainLimit::new(garment.rest, garment.triangles, garment.pinned);
+    let mut first_fix = FrameFix::default();
     let start: Vec<Vec<[f32; 3]>> = match init {
         Init::Rest => {
             let mut rest = tch::no_grad(|| {
                 to_points(&space.skin(&space.consts.rest.unsqueeze(0), &at(first).transforms))
             });
             // The rest garment skinned on a first pose far from rest can cross the body
-            // (hundreds of vertices on a seated start): the first frame is fixed too, by
-            // projection whatever the solver (the paper's fits a decoded frame; this is none).
-            if settings.collision_fix {
-                let surface = PosedSurface::new(body, &poses[first])?;
-                let planes = Planes::of(&rest, &surface);
-                let iterations = match settings.solver {
-                    Solver::Projection => settings.iterations,
-                    Solver::Paper => Solver::Projection.default_iterations(),
-                };
-                contact::push_out(
-                    &mut rest,
-                    &planes,
-                    &limit,
-                    settings.margin,
-                    settings.strain_band,
-                    iterations,
-                );
-                surface.lift_inside(&mut rest, &planes, settings.margin);
-            }
+            // (hundreds of vertices on a seated start): the first frame is fixed too.
+            first_fix = fix_frame(&mut rest, body, &poses[first], &limit, settings, None)?;
             vec![rest]
         }
         Init::Moving(frames) => frames[frames.len().saturating_sub(HISTORY)..].to_vec(),
@@ -230,8 +214,8 @@ pub fn roll_out(
     let mut out = Rollout {
         frames: vec![initial],
         timings: vec![FrameTiming::default()],
-        collision_before: vec![0.0],
-        collision_after: vec![0.0],
+        collision_before: vec![first_fix.before],
+        collision_after: vec![first_fix.after],
     };
     let mut history: Vec<Tensor> = start.iter().map(|g| to_tensor(g, device)).collect();
     // Each frame's body is selected once and kept for the next frame's `before`; the linear
@@ -279,42 +263,19 @@ pub fn roll_out(
         );
         timing.strain_ms = ms(clock);
         let clock = Instant::now();
-        let (mut before, mut after, mut iterations) = (0.0, 0.0, 0);
-        if settings.collision_fix || settings.measure_collisions {
-            let surface = PosedSurface::new(body, pose)?;
-            let planes = Planes::of(&points, &surface);
-            before = planes.loss(&points, settings.margin);
-            after = before;
-            if settings.collision_fix && before > settings.threshold {
-                iterations = settings.iterations;
-                match &shape {
-                    None => contact::push_out(
-                        &mut points,
-                        &planes,
-                        &limit,
-                        settings.margin,
-                        settings.strain_band,
-                        settings.iterations,
-                    ),
-                    Some(shape) => {
-                        let decoded = Decoded {
-                            canonical: &canonical,
-                            transforms: &h.now.transforms,
-                            skinned: &skinned,
-                        };
-                        let g = to_tensor(&points, device);
-                        let fixed =
-                            paper_fix::resolve(space, &decoded, &g, &planes, shape, settings);
-                        points = to_points(&fixed);
-                    }
-                }
-                // The planes miss where a vertex's nearest body vertex is on another limb.
-                surface.lift_inside(&mut points, &planes, settings.margin);
-                after = planes.loss(&points, settings.margin);
-            }
-        }
+        let decoded = Decoded {
+            canonical: &canonical,
+            transforms: &h.now.transforms,
+            skinned: &skinned,
+        };
+        let paper = shape.as_ref().map(|shape| PaperFit {
+            space,
+            shape,
+            decoded,
+        });
+        let fix = fix_frame(&mut points, body, pose, &limit, settings, paper)?;
         timing.collision_ms = ms(clock);
-        timing.collision_iterations = iterations;
+        timing.collision_iterations = fix.iterations;
         if points.iter().flatten().any(|x| !x.is_finite()) {
             bail!("the roll-out produced a non-finite vertex at frame {t}");
         }
@@ -324,12 +285,81 @@ pub fn roll_out(
         }
         out.frames.push(points);
         out.timings.push(timing);
-        out.collision_before.push(before);
-        out.collision_after.push(after);
+        out.collision_before.push(fix.before);
+        out.collision_after.push(fix.after);
         body_before = h.now;
         progress(t - first);
     }
     Ok(out)
+}
+
+/// The paper's collision fix needs the frame's decode (what it optimises `Θ` from).
+struct PaperFit<'a> {
+    space: &'a Space,
+    shape: &'a ShapeTerms,
+    decoded: Decoded<'a>,
+}
+
+/// What the collision fix found and did on one frame: the loss `Σ ReLU(margin − o)` before
+/// and after, and the passes it took (0: not needed, or off).
+#[derive(Clone, Copy, Debug, Default)]
+struct FrameFix {
+    before: f64,
+    after: f64,
+    iterations: usize,
+}
+
+/// One frame's collision measure and fix against the body at `pose`: when the loss exceeds the
+/// threshold, the projection (or, given the frame's decode and the paper solver, the paper's
+/// fit), then the lift of what the planes leave inside. A frame with no decode (a first frame
+/// from rest) is projected whatever the solver, with the projection's passes unless it is the
+/// solver. Neither measured nor fixed when both are off in `settings`.
+fn fix_frame(
+    points: &mut Vec<[f32; 3]>,
+    body: &Body,
+    pose: &[JointTransform],
+    limit: &StrainLimit,
+    settings: &Settings,
+    paper: Option<PaperFit>,
+) -> Result<FrameFix> {
+    let mut fix = FrameFix::default();
+    if !(settings.collision_fix || settings.measure_collisions) {
+        return Ok(fix);
+    }
+    let surface = PosedSurface::new(body, pose)?;
+    let planes = Planes::of(points, &surface);
+    fix.before = planes.loss(points, settings.margin);
+    fix.after = fix.before;
+    if !settings.collision_fix || fix.before <= settings.threshold {
+        return Ok(fix);
+    }
+    match paper {
+        Some(fit) => {
+            fix.iterations = settings.iterations;
+            let g = to_tensor(points, fit.decoded.skinned.device());
+            let fixed =
+                paper_fix::resolve(fit.space, &fit.decoded, &g, &planes, fit.shape, settings);
+            *points = to_points(&fixed);
+        }
+        None => {
+            fix.iterations = match settings.solver {
+                Solver::Projection => settings.iterations,
+                Solver::Paper => Solver::Projection.default_iterations(),
+            };
+            contact::push_out(
+                points,
+                &planes,
+                limit,
+                settings.margin,
+                settings.strain_band,
+                fix.iterations,
+            );
+        }
+    }
+    // The planes miss where a vertex's nearest body vertex is on another limb.
+    surface.lift_inside(points, &planes, settings.margin);
+    fix.after = planes.loss(points, settings.margin);
+    Ok(fix)
 }
 
 /// [`roll_out`] of a model file's dynamic model over the clip frames `played` of `poses` (the

@@ -4,7 +4,7 @@
 //! the body's triangles say what is inside (winding number) and where the surface is.
 
 use crate::body::Body;
-use crate::geometry::{arr3, v3, PointIndex, SurfaceIndex};
+use crate::geometry::{arr3, distance, v3, PointIndex, SurfaceIndex};
 use crate::rig::JointTransform;
 use anyhow::Result;
 use nalgebra::Matrix4;
@@ -143,11 +143,6 @@ impl Planes {
 /// `(p − b)·n`.
 fn offset(p: [f32; 3], b: [f32; 3], n: [f32; 3]) -> f32 {
     (p[0] - b[0]) * n[0] + (p[1] - b[1]) * n[1] + (p[2] - b[2]) * n[2]
-}
-
-/// |p − q|.
-fn distance(p: [f32; 3], q: [f32; 3]) -> f32 {
-    ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt()
 }
 
 #[cfg(test)]
