@@ -133,7 +133,7 @@ fn training_pairs(path: &str) -> Result<Vec<(String, String)>> {
 }
 
 fn sequences(file: &ModelFile, pairs: &[(String, String)], fps: f32) -> Result<Vec<Sequence>> {
-    let (skeleton, vertices) = (&file.body.skeleton, file.garment.vertex_count());
+    let (body, vertices) = (&file.body, file.garment.vertex_count());
     pairs
         .iter()
         .map(|(m, s)| {
@@ -141,7 +141,7 @@ fn sequences(file: &ModelFile, pairs: &[(String, String)], fps: f32) -> Result<V
                 Path::new(m),
                 Path::new(s),
                 &Default::default(),
-                skeleton,
+                body,
                 Some(fps),
                 vertices,
             )

@@ -388,7 +388,7 @@ fn eval_writes_a_pc2_that_blender_plays() {
     let frames = load_clip(
         &sample("motions/131_02.bvh"),
         &Default::default(),
-        &body(),
+        body(),
         Some(10.0),
     )
     .unwrap()
@@ -767,7 +767,7 @@ fn clip(name: &str) -> garmentbake::rig::SkelAnimation {
     load_clip(
         &sample(&format!("motions/{name}")),
         &Default::default(),
-        &b,
+        b,
         Some(30.0),
     )
     .unwrap()
@@ -1104,7 +1104,7 @@ fn clip_at(name: &str, fps: f32) -> garmentbake::rig::SkelAnimation {
     load_clip(
         &sample(&format!("motions/{name}")),
         &Default::default(),
-        &b,
+        b,
         Some(fps),
     )
     .unwrap()

@@ -22,7 +22,7 @@ fn clip(body: &Body, name: &str, fps: f32) -> SkelAnimation {
     load_clip(
         &sample(&format!("motions/{name}.bvh")),
         &Default::default(),
-        &body,
+        body,
         Some(fps),
     )
     .unwrap()
