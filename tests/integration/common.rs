@@ -336,3 +336,20 @@ pub const SKIRT_ON_131_01: [&str; 6] = [
 pub fn short_lead_in_cached() -> [&'static str; 6] {
     ["--settle", "0.1", "--blend", "0.2", "--cache", sim_cache()]
 }
+
+/// A shipped clip (`samples/motions/NAME.bvh`) retargeted onto `body`, read as `pose` reads it,
+/// at its own rate or `fps`.
+pub fn sample_clip(
+    body: &garmentbake::body::Body,
+    name: &str,
+    fps: Option<f32>,
+) -> garmentbake::rig::SkelAnimation {
+    garmentbake::motion::load_clip(
+        &sample(&format!("motions/{name}.bvh")),
+        &Default::default(),
+        body,
+        fps,
+    )
+    .unwrap()
+    .animation
+}

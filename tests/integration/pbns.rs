@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::{Mutex, OnceLock};
 
-use crate::common::{run_ok, sample, unit_square};
+use crate::common::{run_ok, sample, sample_clip, unit_square};
 use tch::{Device, Kind, Tensor};
 
 fn body() -> &'static Body {
@@ -385,15 +385,7 @@ fn eval_writes_a_pc2_that_blender_plays() {
     let first = std::fs::read(&pc2).unwrap();
     let report: serde_json::Value = serde_json::from_str(&eval(true)).unwrap();
     assert_eq!(std::fs::read(&pc2).unwrap(), first, "eval is deterministic");
-    let frames = load_clip(
-        &sample("motions/131_02.bvh"),
-        &Default::default(),
-        body(),
-        Some(10.0),
-    )
-    .unwrap()
-    .animation
-    .frame_count();
+    let frames = sample_clip(body(), "131_02", Some(10.0)).frame_count();
     let (version, points, samples, data) = read_pc2(&pc2);
     assert_eq!((version, points, samples), (1, 2808, frames));
     assert_eq!(report["frames"], frames);
@@ -1100,15 +1092,7 @@ fn a_short_training_lowers_the_loss_and_beats_plain_lbs_inside_the_body() {
 }
 
 fn clip_at(name: &str, fps: f32) -> garmentbake::rig::SkelAnimation {
-    let b = body();
-    load_clip(
-        &sample(&format!("motions/{name}")),
-        &Default::default(),
-        b,
-        Some(fps),
-    )
-    .unwrap()
-    .animation
+    sample_clip(body(), name.trim_end_matches(".bvh"), Some(fps))
 }
 
 #[test]

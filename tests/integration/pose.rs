@@ -4,7 +4,6 @@
 use crate::common::*;
 use garmentbake::body::Body;
 use garmentbake::io::gltf_body::read_body;
-use garmentbake::motion::load_clip;
 use garmentbake::rig::SkelAnimation;
 
 /// Our own LBS of the body at a clip frame (the reference the readers must reproduce).
@@ -43,14 +42,7 @@ fn threejs_skins_the_posed_body_like_our_lbs() {
     let dir = out_dir("pose_threejs");
     let file = pose("131_01", &dir);
     let body = read_body(&sample("body.glb")).unwrap();
-    let clip = load_clip(
-        &sample("motions/131_01.bvh"),
-        &Default::default(),
-        &body,
-        None,
-    )
-    .unwrap()
-    .animation;
+    let clip = sample_clip(&body, "131_01", None);
     let n = clip.frame_count();
     let frames = [0, n / 4, n / 2, 3 * n / 4, n - 1];
     let times: Vec<f32> = frames.iter().map(|&f| f as f32 / clip.fps).collect();
@@ -74,14 +66,7 @@ fn blender_imports_and_plays_the_posed_body() {
     let dir = out_dir("pose_blender");
     let file = pose("131_02", &dir);
     let body = read_body(&sample("body.glb")).unwrap();
-    let clip = load_clip(
-        &sample("motions/131_02.bvh"),
-        &Default::default(),
-        &body,
-        None,
-    )
-    .unwrap()
-    .animation;
+    let clip = sample_clip(&body, "131_02", None);
     let frames = [10, 600, 1200];
     let result = blender_positions(&file, &frames, clip.fps);
     let mesh = &result["meshes"][0];

@@ -8,14 +8,7 @@ use garmentbake::motion::load_clip;
 fn retargeted_walk_keeps_stance_feet_on_the_floor_and_the_body_upright() {
     let body = read_body(&sample("body.glb")).unwrap();
     let sk = &body.skeleton;
-    let anim = load_clip(
-        &sample("motions/131_01.bvh"),
-        &Default::default(),
-        &body,
-        None,
-    )
-    .unwrap()
-    .animation;
+    let anim = sample_clip(&body, "131_01", None);
     let j = |n: &str| sk.joint_index(n).unwrap();
     // The lowest foot vertex of either foot on frames where a foot stands (the ground is put
     // there), and each foot's own on its stance frames: a foot planted beside the grounded one
