@@ -7,7 +7,7 @@
 //! here the blur shows as b below σ with a hem amplitude ratio below 1.
 
 use crate::body::Body;
-use crate::geometry::TriMesh;
+use crate::geometry::{Frames, TriMesh};
 use crate::metrics::ensemble::{Divergence, Ensemble, Score, Spread};
 use crate::metrics::hem::{self, Lag, SpectrumSummary, Trace};
 use crate::metrics::plausibility::{self, Plausibility};
@@ -28,7 +28,7 @@ pub const RUNS_MEAN: &str = "runs-mean";
 /// model that played it, which e(k) restarts from each simulation's state.
 pub struct Cache {
     pub name: String,
-    pub frames: Vec<Vec<[f32; 3]>>,
+    pub frames: Frames,
     pub model: Option<ModelFile>,
 }
 
@@ -40,7 +40,7 @@ pub struct Inputs<'a> {
     pub poses: &'a [Vec<JointTransform>],
     pub fps: f32,
     /// Two or more simulations of the clip (three or more for a ceiling worth the name).
-    pub simulations: &'a [Vec<Vec<[f32; 3]>>],
+    pub simulations: &'a [Frames],
     pub caches: &'a [Cache],
     /// The quasi-static cache the hem's swing is measured beyond (PBNS), by index.
     pub baseline: Option<usize>,
@@ -256,7 +256,7 @@ pub fn compare(inputs: &Inputs, settings: &Settings) -> Result<Report> {
     let mut caches = Vec::new();
     let mean = settings.with_mean.then(|| Cache {
         name: RUNS_MEAN.into(),
-        frames: ensemble.mean().to_vec(),
+        frames: Frames::new(ensemble.mean().to_vec(), inputs.fps),
         model: None,
     });
     let all: Vec<&Cache> = inputs.caches.iter().chain(mean.as_ref()).collect();
@@ -367,7 +367,7 @@ fn restarted_horizon(
             &mut |f| bar.set_position(done + f as u64),
         )?;
         done += horizon as u64;
-        Ok::<_, anyhow::Error>(played.frames)
+        Ok::<_, anyhow::Error>(played.frames.into_points())
     });
     bar.finish_and_clear();
     curve

@@ -2,15 +2,17 @@
 //! line between the latents of two frames. A smooth space gives plausible garments all the way
 //! (no blow-up, nothing through the body); a space that only memorised its frames does not.
 
+use crate::geometry::Frames;
 use crate::models::dynamic::{BodyAnchors, BodyFrames};
 use crate::models::file::ModelFile;
 use crate::rig::JointTransform;
 use anyhow::{bail, Result};
 use tch::{Kind, Tensor};
 
-/// The decoded garments, one per clip frame `a..=b`, and the two end latents.
+/// The decoded garments, one per clip frame `a..=b` (numbered from `a`), and the two end
+/// latents.
 pub struct LatentPath {
-    pub frames: Vec<Vec<[f32; 3]>>,
+    pub frames: Frames,
     pub z_a: Vec<f32>,
     pub z_b: Vec<f32>,
 }
@@ -22,7 +24,7 @@ pub struct LatentPath {
 pub fn between(
     file: &ModelFile,
     poses: &[Vec<JointTransform>],
-    sim: &[Vec<[f32; 3]>],
+    sim: &Frames,
     (a, b): (usize, usize),
 ) -> Result<LatentPath> {
     let frames = poses.len().min(sim.len());
@@ -57,10 +59,13 @@ pub fn between(
     let flat: Vec<f32> = garments.reshape([-1]).try_into()?;
     let latent = |i: i64| -> Result<Vec<f32>> { Ok(z.get(i).try_into()?) };
     Ok(LatentPath {
-        frames: flat
-            .chunks_exact(3 * v)
-            .map(|f| f.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
-            .collect(),
+        frames: Frames::new(
+            flat.chunks_exact(3 * v)
+                .map(|f| f.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
+                .collect(),
+            sim.fps,
+        )
+        .starting_at(sim.start + a),
         z_a: latent(0)?,
         z_b: latent(1)?,
     })

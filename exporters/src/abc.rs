@@ -48,10 +48,9 @@ pub fn write_point_caches_in(
         .iter()
         .try_for_each(PointCache::check)
         .map_err(invalid)?;
-    if let Some(c) = caches
-        .iter()
-        .find(|c| c.fps != first.fps || c.frame_count() != first.frame_count())
-    {
+    if let Some(c) = caches.iter().find(|c| {
+        c.fps != first.fps || c.start != first.start || c.frame_count() != first.frame_count()
+    }) {
         return Err(invalid(format!(
             "point caches '{}' and '{}' do not share a timeline",
             first.name, c.name
@@ -112,6 +111,7 @@ fn spec(caches: &[PointCache], space: CacheSpace) -> Value<'_> {
         .collect();
     Value::Dict(vec![
         ("fps", Value::Float(caches[0].fps as f64)),
+        ("start", Value::Int(caches[0].start as i64)),
         ("frames", Value::Int(caches[0].frame_count() as i64)),
         (
             "user_properties",

@@ -230,6 +230,9 @@ pub fn unit_quat(q: [f32; 4]) -> [f32; 4] {
 pub struct PointCache {
     pub name: String,
     pub fps: f32,
+    /// The clip frame of the first sample (0 unless the cache is a span of a longer clip):
+    /// PC2's start frame, MDD's first time, USD's first time code, Alembic's start time.
+    pub start: usize,
     pub triangles: Vec<[u32; 3]>,
     /// The mesh's UVs, when it has them: face-varying (a seam vertex has one UV per side).
     pub uvs: Option<CacheUvs>,

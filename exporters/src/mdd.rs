@@ -26,7 +26,7 @@ pub enum MddError {
     Format(String),
 }
 
-/// Writes `cache` atomically; frame f's time is f / fps.
+/// Writes `cache` atomically; frame f's time is (start + f) / fps.
 pub fn write(path: &Path, cache: &PointCache) -> Result<(), MddError> {
     let bytes = to_bytes(cache)?;
     write_atomic_with(path, |w| w.write_all(&bytes))?;
@@ -41,7 +41,7 @@ pub fn to_bytes(cache: &PointCache) -> Result<Vec<u8>, MddError> {
     bytes.extend_from_slice(&(frames as i32).to_be_bytes());
     bytes.extend_from_slice(&(cache.point_count as i32).to_be_bytes());
     for f in 0..frames {
-        bytes.extend_from_slice(&(f as f32 / cache.fps).to_be_bytes());
+        bytes.extend_from_slice(&((cache.start + f) as f32 / cache.fps).to_be_bytes());
     }
     for c in cache.points.iter().flatten() {
         bytes.extend_from_slice(&c.to_be_bytes());
@@ -120,6 +120,7 @@ mod tests {
         let cache = PointCache {
             name: "a".into(),
             fps: 4.0,
+            start: 0,
             triangles: Vec::new(),
             uvs: None,
             point_count: 2,
@@ -137,6 +138,16 @@ mod tests {
         assert_eq!(&bytes[16..20], &1.0f32.to_be_bytes());
         let back = read(&bytes).unwrap();
         assert_eq!(back.times, [0.0, 0.25]);
+        // A span of a longer clip keeps its clip times.
+        let later = read(
+            &to_bytes(&PointCache {
+                start: 6,
+                ..cache.clone()
+            })
+            .unwrap(),
+        )
+        .unwrap();
+        assert_eq!(later.times, [1.5, 1.75]);
         assert_eq!(back.frames[1], [[7.0, 8.0, 9.0], [0.5, 0.25, -1.0]]);
         let mut wrong = bytes.clone();
         wrong[3] = 3;

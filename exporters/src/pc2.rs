@@ -31,7 +31,7 @@ pub enum Pc2Error {
     Format(String),
 }
 
-/// Writes `cache` atomically, one sample per frame starting at frame 0 (PC2 has no rate; the
+/// Writes `cache` atomically, one sample per frame from its start frame (PC2 has no rate; the
 /// cache's fps is the scene's).
 pub fn write(path: &Path, cache: &PointCache) -> Result<(), Pc2Error> {
     let bytes = to_bytes(cache)?;
@@ -45,7 +45,7 @@ pub fn to_bytes(cache: &PointCache) -> Result<Vec<u8>, Pc2Error> {
     let header = Header {
         version: 1,
         points: cache.point_count,
-        start_frame: 0.0,
+        start_frame: cache.start as f32,
         sample_rate: 1.0,
         samples: cache.frame_count(),
     };
@@ -124,6 +124,7 @@ mod tests {
         let cache = PointCache {
             name: "a".into(),
             fps: 30.0,
+            start: 12,
             triangles: Vec::new(),
             uvs: None,
             point_count: 2,
@@ -135,8 +136,8 @@ mod tests {
         assert_eq!(&bytes[..12], b"POINTCACHE2\0");
         let (h, back) = read(&bytes).unwrap();
         assert_eq!(
-            (h.version, h.points, h.samples, h.sample_rate),
-            (1, 2, 2, 1.0)
+            (h.version, h.points, h.samples, h.sample_rate, h.start_frame),
+            (1, 2, 2, 1.0, 12.0)
         );
         assert_eq!(back, frames);
         let partial = PointCache {

@@ -70,15 +70,17 @@ fn same_timeline(caches: &[PointCache]) -> Result<(), String> {
     let first = caches.first().ok_or("no point cache to write")?;
     match caches
         .iter()
-        .find(|c| c.fps != first.fps || c.frame_count() != first.frame_count())
+        .find(|c| c.fps != first.fps || c.start != first.start || c.frame_count() != first.frame_count())
     {
         Some(c) => Err(format!(
-            "point caches '{}' ({} frames at {} fps) and '{}' ({} at {}) do not share a timeline",
+            "point caches '{}' ({} frames from frame {} at {} fps) and '{}' ({} from {} at {}) do not share a timeline",
             first.name,
             first.frame_count(),
+            first.start,
             first.fps,
             c.name,
             c.frame_count(),
+            c.start,
             c.fps
         )),
         None => Ok(()),
@@ -402,6 +404,7 @@ fn animation_spec<'a>(
 
 fn point_caches_spec<'a>(caches: &'a [PointCache], root: &str, space: CacheSpace) -> Value<'a> {
     let frames = caches[0].frame_count();
+    let start = caches[0].start;
     let mut taken = HashSet::from([root.to_string()]);
     let meshes = caches
         .iter()
@@ -417,14 +420,21 @@ fn point_caches_spec<'a>(caches: &'a [PointCache], root: &str, space: CacheSpace
             },
         ),
         ("fps", Value::Float(caches[0].fps as f64)),
-        ("start", Value::Float(0.0)),
-        ("end", Value::Float(frames.saturating_sub(1) as f64)),
+        ("start", Value::Float(start as f64)),
+        (
+            "end",
+            Value::Float((start + frames).saturating_sub(1) as f64),
+        ),
         ("meters_per_unit", Value::Float(space.meters_per_unit())),
         ("up_axis", space.up_axis().to_string().into()),
         ("provenance", Value::List(Vec::new())),
         (
             "times",
-            Value::List((0..frames).map(|f| Value::Float(f as f64)).collect()),
+            Value::List(
+                (start..start + frames)
+                    .map(|f| Value::Float(f as f64))
+                    .collect(),
+            ),
         ),
         ("meshes", Value::List(meshes)),
     ])

@@ -27,8 +27,10 @@ def write_point_caches(spec, path):
     # A plain archive: CreateArchiveWithInfo would stamp the time of writing, and the same
     # command must give the same bytes twice. Units and up axis go into user properties.
     archive = Abc.OArchive(path)
-    # Sample i at i / fps, the same frames as the PC2 / USD of the same command.
-    sampling = archive.addTimeSampling(AbcCoreAbstract.TimeSampling(1.0 / spec["fps"], 0.0))
+    # Sample i at (start + i) / fps, the same frames as the PC2 / USD of the same command.
+    sampling = archive.addTimeSampling(
+        AbcCoreAbstract.TimeSampling(1.0 / spec["fps"], spec.get("start", 0) / spec["fps"])
+    )
     top = archive.getTop()
     frames = spec["frames"]
     for m in spec["meshes"]:

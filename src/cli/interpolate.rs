@@ -19,7 +19,8 @@ use std::path::PathBuf;
 /// is smooth (plausible garments, no blow-up, nothing through the body) or only memorised its
 /// training frames. Prints per frame the distance to the simulation of that frame, the vertices
 /// inside the body and the edge strain. Writes the walk as a point cache whose first sample is
-/// clip frame A; draw it with `garmentbake preview --cache OUT --cache-start A`.
+/// clip frame A (recorded in the cache: PC2's start frame, MDD's times, USD's time codes,
+/// Alembic's start time); draw it with `garmentbake preview --cache OUT`.
 #[derive(clap::Args)]
 pub struct Args {
     /// Dynamic model (.safetensors); the space stage is enough.
@@ -87,7 +88,7 @@ impl Execute for Args {
         let clips = self.clips.clips(None);
         let (motion, clip) = clips.load_single_at(&file.body, Some(fps))?;
         let clip = clip.animation;
-        let sim = read_pc2(&self.sim, file.garment.vertex_count())?;
+        let sim = read_pc2(&self.sim, file.garment.vertex_count(), fps)?;
         // A simulation of the clip's first frames (`simulate --frames N`) is enough.
         let poses: Vec<_> = (0..clip.frame_count().min(sim.len()))
             .map(|f| clip.local_pose(f))
@@ -103,7 +104,7 @@ impl Execute for Args {
         let path =
             between(&file, &poses, &sim, (a, b)).with_context(|| format!("--between {a},{b}"))?;
         outputs.write(&self.out, |p| {
-            write_cache_in(p, &file.garment, &path.frames, fps, self.space.space())
+            write_cache_in(p, &file.garment, &path.frames, self.space.space())
         })?;
         outputs.commit()?;
         let (per_frame, summary) = stats::of(
@@ -115,7 +116,7 @@ impl Execute for Args {
         );
         let steps = per_frame
             .iter()
-            .zip(&path.frames)
+            .zip(path.frames.iter())
             .map(|(s, x)| step(s, a, b, x, &sim[a + s.frame]))
             .collect();
         let latent_distance = path

@@ -37,10 +37,11 @@ pub struct Args {
     /// `simulate` or `eval`) that poses it.
     #[arg(long = "cache", help_heading = "Inputs")]
     pub caches: Vec<PathBuf>,
-    /// The clip frame of each --cache's first sample (a cache of part of the clip, e.g. from
-    /// `interpolate`); --error-vs always starts at frame 0.
-    #[arg(long, default_value_t = 0, help_heading = "Advanced")]
-    pub cache_start: usize,
+    /// The clip frame of each --cache's (and --error-vs') first sample. By default the start
+    /// frame the cache records (PC2's header: 0 from `simulate` or `eval`, A from `interpolate
+    /// --between A,B`); give it for a cache of part of the clip that does not record it.
+    #[arg(long, help_heading = "Advanced")]
+    pub cache_start: Option<usize>,
     /// With several --cache: draw each cached garment in its own panel (labelled by its file
     /// name), side by side per frame, instead of all on one body: model / simulation / LBS.
     #[arg(long, help_heading = "Outputs")]

@@ -167,10 +167,10 @@ impl Execute for Args {
         bar.finish_and_clear();
         let fps = clip.animation.fps;
         outputs.write(&self.out, |p| {
-            write_cache(p, &garment.mesh, &outcome.garment, fps)
+            write_cache(p, &garment.mesh, &outcome.garment)
         })?;
         if let Some(path) = &self.body_out {
-            outputs.write(path, |p| write_cache(p, body.mesh(), &outcome.body, fps))?;
+            outputs.write(path, |p| write_cache(p, body.mesh(), &outcome.body))?;
         }
         outputs.commit()?;
         let e = outcome.entry;

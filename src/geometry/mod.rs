@@ -7,6 +7,7 @@
 
 pub mod candidates;
 pub mod edges;
+pub mod frames;
 pub mod laplacian;
 pub mod mesh;
 pub mod nearest;
@@ -20,6 +21,7 @@ pub mod winding;
 pub(crate) mod test_meshes;
 
 pub use candidates::CandidateTree;
+pub use frames::Frames;
 pub use laplacian::Laplacian;
 pub use mesh::{FaceVaryingUv, MeshError, TriMesh};
 pub use nearest::{NearestError, PointIndex};

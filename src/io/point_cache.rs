@@ -1,12 +1,14 @@
 //! Point caches of our meshes: written through `exporters` (a mesh's frames in the format the
 //! file's extension names) and read back (PC2), checked against the mesh they belong to.
 
+use crate::geometry::Frames;
 use anyhow::{bail, Context, Result};
 use exporters::CacheSpace;
 use std::path::Path;
 
-/// Every frame of a PC2 file whose point count must be `vertices` (the mesh it plays on).
-pub fn read_pc2(path: &Path, vertices: usize) -> Result<Vec<Vec<[f32; 3]>>> {
+/// Every frame of a PC2 file whose point count must be `vertices` (the mesh it plays on), from
+/// its start frame, at `fps` (PC2 has no rate: the clip it belongs to has).
+pub fn read_pc2(path: &Path, vertices: usize, fps: f32) -> Result<Frames> {
     let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
     let (header, frames) =
         exporters::pc2::read(&bytes).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
@@ -26,53 +28,45 @@ pub fn read_pc2(path: &Path, vertices: usize) -> Result<Vec<Vec<[f32; 3]>>> {
     {
         bail!("{}: frame {f} has non-finite points", path.display());
     }
-    Ok(frames)
+    // A start frame that is not a whole frame (another tool's sub-frame cache) counts from the
+    // frame it falls in.
+    let start = header.start_frame.max(0.0).floor() as usize;
+    Ok(Frames::new(frames, fps).starting_at(start))
 }
 
 /// A per-frame point cache of `mesh`'s vertices, in the format the extension names.
-pub fn write_cache(
-    path: &Path,
-    mesh: &crate::geometry::TriMesh,
-    frames: &[Vec<[f32; 3]>],
-    fps: f32,
-) -> Result<()> {
-    write_cache_in(path, mesh, frames, fps, CacheSpace::NATIVE)
+pub fn write_cache(path: &Path, mesh: &crate::geometry::TriMesh, frames: &Frames) -> Result<()> {
+    write_cache_in(path, mesh, frames, CacheSpace::NATIVE)
 }
 
 /// [`write_cache`] in the units and up axis of `space` (`--out-units`, `--out-up`).
 pub fn write_cache_in(
     path: &Path,
     mesh: &crate::geometry::TriMesh,
-    frames: &[Vec<[f32; 3]>],
-    fps: f32,
+    frames: &Frames,
     space: CacheSpace,
 ) -> Result<()> {
     let name = path
         .file_stem()
         .map_or("cache".into(), |s| s.to_string_lossy().into_owned());
-    write_caches_in(path, &[(&name, mesh, frames)], fps, space)
+    write_caches_in(path, &[(&name, mesh, frames)], space)
 }
 
 /// A named mesh and its frames, one entry of [`write_caches`].
-pub type NamedFrames<'a> = (&'a str, &'a crate::geometry::TriMesh, &'a [Vec<[f32; 3]>]);
+pub type NamedFrames<'a> = (&'a str, &'a crate::geometry::TriMesh, &'a Frames);
 
 /// Several meshes' frames of one shot (a garment and the body it moves on), each named, in one
 /// file: a USD stage or Alembic archive (one mesh: any point-cache format, a VAT included).
-pub fn write_caches(path: &Path, meshes: &[NamedFrames], fps: f32) -> Result<()> {
-    write_caches_in(path, meshes, fps, CacheSpace::NATIVE)
+pub fn write_caches(path: &Path, meshes: &[NamedFrames]) -> Result<()> {
+    write_caches_in(path, meshes, CacheSpace::NATIVE)
 }
 
 /// [`write_caches`] in the units and up axis of `space`: the points are turned here, the file
 /// records it where its format has a place (USD, Alembic, a VAT's sidecar; PC2 and MDD have none).
-pub fn write_caches_in(
-    path: &Path,
-    meshes: &[NamedFrames],
-    fps: f32,
-    space: CacheSpace,
-) -> Result<()> {
+pub fn write_caches_in(path: &Path, meshes: &[NamedFrames], space: CacheSpace) -> Result<()> {
     let result = match (exporters::FileKind::written(path), meshes) {
         (Some(exporters::FileKind::Vat), [(_, mesh, frames)]) => {
-            write_vat(path, mesh, frames, fps, space).map(|_| ())
+            write_vat(path, mesh, frames, space).map(|_| ())
         }
         (Some(exporters::FileKind::Vat), _) => Err(exporters::ExportError::Unsupported {
             path: path.display().to_string(),
@@ -84,7 +78,8 @@ pub fn write_caches_in(
                 .iter()
                 .map(|&(name, mesh, frames)| exporters::PointCache {
                     name: name.into(),
-                    fps,
+                    fps: frames.fps,
+                    start: frames.start,
                     triangles: mesh.triangles.clone(),
                     uvs: mesh.uv.as_ref().map(|uv| exporters::asset::CacheUvs {
                         coords: uv.coords.clone(),
@@ -110,10 +105,10 @@ pub fn write_caches_in(
 pub fn write_vat(
     path: &Path,
     mesh: &crate::geometry::TriMesh,
-    frames: &[Vec<[f32; 3]>],
-    fps: f32,
+    frames: &Frames,
     space: CacheSpace,
 ) -> Result<exporters::vat::Sidecar> {
+    let fps = frames.fps;
     use crate::geometry::normals::vertex_normals;
     let n = mesh.vertex_count();
     if let Some(f) = frames.iter().position(|f| f.len() != n) {

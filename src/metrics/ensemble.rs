@@ -10,7 +10,7 @@
 //! do not add this way, and a run against the mean of two others is not comparable with a model
 //! against one run (E|X − mean₂|² = 1.5σ²): every figure here is of one cache against one run.
 
-use super::Frames;
+use crate::geometry::Frames;
 use serde::Serialize;
 use std::ops::Range;
 
@@ -51,7 +51,7 @@ pub fn frame_ms(a: &[[f32; 3]], b: &[[f32; 3]]) -> f64 {
 }
 
 /// [`frame_ms`] of every frame (the shorter's length).
-pub fn per_frame_ms(a: &Frames, b: &Frames) -> Vec<f64> {
+pub fn per_frame_ms(a: &[Vec<[f32; 3]>], b: &[Vec<[f32; 3]>]) -> Vec<f64> {
     a.iter().zip(b).map(|(x, y)| frame_ms(x, y)).collect()
 }
 
@@ -72,7 +72,7 @@ fn pairs(n: usize) -> impl Iterator<Item = (usize, usize)> {
 
 /// Two or more simulations of one clip, with their per-frame spread and mean garment.
 pub struct Ensemble<'a> {
-    runs: &'a [Vec<Vec<[f32; 3]>>],
+    runs: &'a [Frames],
     /// σ²(t): half the mean pairwise squared distance of frame t (m²).
     spread: Vec<f64>,
     mean: Vec<Vec<[f32; 3]>>,
@@ -111,11 +111,11 @@ pub struct Score {
 
 impl<'a> Ensemble<'a> {
     /// `None` with fewer than two runs (one run has no spread). Runs are cut to the shortest.
-    pub fn new(runs: &'a [Vec<Vec<[f32; 3]>>]) -> Option<Ensemble<'a>> {
+    pub fn new(runs: &'a [Frames]) -> Option<Ensemble<'a>> {
         if runs.len() < 2 {
             return None;
         }
-        let frames = runs.iter().map(Vec::len).min().unwrap_or(0);
+        let frames = runs.iter().map(|r| r.len()).min().unwrap_or(0);
         let n_pairs = (runs.len() * (runs.len() - 1) / 2) as f64;
         let spread = (0..frames)
             .map(|t| {
@@ -133,7 +133,7 @@ impl<'a> Ensemble<'a> {
         })
     }
 
-    pub fn runs(&self) -> &[Vec<Vec<[f32; 3]>>] {
+    pub fn runs(&self) -> &[Frames] {
         self.runs
     }
 
@@ -174,7 +174,7 @@ impl<'a> Ensemble<'a> {
     }
 
     /// `frames` (a cache of the clip, frame 0 its start) against every run.
-    pub fn score(&self, frames: &Frames) -> Score {
+    pub fn score(&self, frames: &[Vec<[f32; 3]>]) -> Score {
         let t = self.frames().min(frames.len());
         let frames = &frames[..t];
         let each: Vec<Vec<f64>> = self.runs.iter().map(|r| per_frame_ms(frames, r)).collect();
@@ -285,7 +285,7 @@ pub struct Divergence {
     pub sigma_mm: Vec<f64>,
 }
 
-fn mean_frame(caches: &[&Vec<Vec<[f32; 3]>>], t: usize) -> Vec<[f32; 3]> {
+fn mean_frame(caches: &[&Frames], t: usize) -> Vec<[f32; 3]> {
     let n = caches.len().max(1) as f64;
     let mut sum = vec![[0.0f64; 3]; caches[0][t].len()];
     for c in caches {
@@ -296,7 +296,7 @@ fn mean_frame(caches: &[&Vec<Vec<[f32; 3]>>], t: usize) -> Vec<[f32; 3]> {
     sum.iter().map(|s| s.map(|x| (x / n) as f32)).collect()
 }
 
-fn mean_garment(caches: &[&Vec<Vec<[f32; 3]>>], frames: usize) -> Vec<Vec<[f32; 3]>> {
+fn mean_garment(caches: &[&Frames], frames: usize) -> Vec<Vec<[f32; 3]>> {
     (0..frames).map(|t| mean_frame(caches, t)).collect()
 }
 
@@ -322,21 +322,22 @@ mod tests {
 
     /// `frames` × `vertices` of a moving truth, plus independent Gaussian noise of total
     /// variance `sigma²` per vertex (σ/√3 per axis).
-    fn noisy(truth: &[Vec<[f32; 3]>], sigma: f64, seed: u64) -> Vec<Vec<[f32; 3]>> {
+    fn noisy(truth: &[Vec<[f32; 3]>], sigma: f64, seed: u64) -> Frames {
         let mut g = Noise(seed);
         let s = sigma / 3f64.sqrt();
-        truth
+        let points = truth
             .iter()
             .map(|f| {
                 f.iter()
                     .map(|p| p.map(|c| c + (s * g.gauss()) as f32))
                     .collect()
             })
-            .collect()
+            .collect();
+        Frames::new(points, 30.0)
     }
 
-    fn truth(frames: usize, vertices: usize) -> Vec<Vec<[f32; 3]>> {
-        (0..frames)
+    fn truth(frames: usize, vertices: usize) -> Frames {
+        let points = (0..frames)
             .map(|t| {
                 (0..vertices)
                     .map(|v| {
@@ -345,7 +346,8 @@ mod tests {
                     })
                     .collect()
             })
-            .collect()
+            .collect();
+        Frames::new(points, 30.0)
     }
 
     #[test]

@@ -17,9 +17,6 @@ pub mod hem;
 pub mod plausibility;
 pub mod reference_error;
 
-/// A garment's frames as the metrics read them: per frame, per vertex.
-pub type Frames = [Vec<[f32; 3]>];
-
 /// The PBNS metrics, averaged over frames.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Metrics {

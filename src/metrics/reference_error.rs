@@ -4,7 +4,7 @@
 //! simulations are: a loose garment is chaotic, so the simulator itself defines it only to that
 //! spread, and a model as far from them as they are from each other is as good as a re-run.
 
-use super::Frames;
+use crate::geometry::Frames;
 use serde::{Deserialize, Serialize};
 
 /// The error of played frames against a reference: mean vertex L2 distance, over spans of the
@@ -20,7 +20,7 @@ pub struct ReferenceError {
 
 impl ReferenceError {
     /// `frames` against `reference`, frame by frame (the shorter's length).
-    pub fn between(frames: &Frames, reference: &Frames) -> ReferenceError {
+    pub fn between(frames: &[Vec<[f32; 3]>], reference: &[Vec<[f32; 3]>]) -> ReferenceError {
         ReferenceError::of(&distances_mm(frames, reference))
     }
 
@@ -58,7 +58,7 @@ impl ReferenceError {
 }
 
 /// Mean and largest vertex distance (mm) of each frame to the reference's.
-pub fn distances_mm(frames: &Frames, reference: &Frames) -> Vec<(f64, f64)> {
+pub fn distances_mm(frames: &[Vec<[f32; 3]>], reference: &[Vec<[f32; 3]>]) -> Vec<(f64, f64)> {
     frames
         .iter()
         .zip(reference)
@@ -75,7 +75,7 @@ pub fn distances_mm(frames: &Frames, reference: &Frames) -> Vec<(f64, f64)> {
 /// Two or more simulations of one clip, their vertex-wise mean garment computed once for every
 /// sequence compared with them.
 pub struct Simulations<'a> {
-    caches: &'a [Vec<Vec<[f32; 3]>>],
+    caches: &'a [Frames],
     mean: Vec<Vec<[f32; 3]>>,
 }
 
@@ -93,7 +93,7 @@ pub struct Ensemble {
 
 impl<'a> Simulations<'a> {
     /// `None` with fewer than two: one simulation has no spread and is its own mean.
-    pub fn new(caches: &'a [Vec<Vec<[f32; 3]>>]) -> Option<Simulations<'a>> {
+    pub fn new(caches: &'a [Frames]) -> Option<Simulations<'a>> {
         (caches.len() >= 2).then(|| Simulations {
             caches,
             mean: mean_garment(&caches.iter().collect::<Vec<_>>()),
@@ -101,7 +101,7 @@ impl<'a> Simulations<'a> {
     }
 
     /// `frames` against each simulation and against their mean garment.
-    pub fn ensemble(&self, frames: &Frames) -> Ensemble {
+    pub fn ensemble(&self, frames: &[Vec<[f32; 3]>]) -> Ensemble {
         let each: Vec<ReferenceError> = self
             .caches
             .iter()
@@ -145,7 +145,7 @@ impl<'a> Simulations<'a> {
 }
 
 /// The vertex-wise mean of several caches of one garment (the shortest's frames).
-fn mean_garment(caches: &[&Vec<Vec<[f32; 3]>>]) -> Vec<Vec<[f32; 3]>> {
+fn mean_garment(caches: &[&Frames]) -> Vec<Vec<[f32; 3]>> {
     let frames = caches.iter().map(|c| c.len()).min().unwrap_or(0);
     let n = caches.len().max(1) as f32;
     (0..frames)
@@ -165,11 +165,12 @@ fn mean_garment(caches: &[&Vec<Vec<[f32; 3]>>]) -> Vec<Vec<[f32; 3]>> {
 mod tests {
     use super::*;
 
-    fn cache(offsets_mm: &[f32]) -> Vec<Vec<[f32; 3]>> {
-        offsets_mm
+    fn cache(offsets_mm: &[f32]) -> Frames {
+        let points = offsets_mm
             .iter()
             .map(|&d| vec![[d * 1e-3, 0.0, 0.0], [0.0, d * 1e-3, 1.0]])
-            .collect()
+            .collect();
+        Frames::new(points, 30.0)
     }
 
     #[test]

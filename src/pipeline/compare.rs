@@ -90,7 +90,7 @@ pub fn run(request: &Request) -> Result<Report> {
     }
     let poses: Vec<_> = (0..played).map(|f| clip.animation.local_pose(f)).collect();
     let read = |path: &Path| {
-        let mut frames = read_pc2(path, n)?;
+        let mut frames = read_pc2(path, n, fps)?;
         if frames.len() != clip_frames && frames.len() != played {
             bail!(
                 "{}: {} frames, {} has {clip_frames} at {fps} fps (another clip or rate?)",

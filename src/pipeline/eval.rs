@@ -6,6 +6,7 @@ use crate::eval::{
     compare_frames, lbs_frames, model_frames, outside_weights, ClipCoverage, Comparison,
     OverlapSummary,
 };
+use crate::geometry::Frames;
 use crate::io::gltf_body::read_body;
 use crate::io::point_cache::write_cache_in;
 use crate::metrics::{body_edges_under, ClothGeometry, Inside, Metrics};
@@ -164,7 +165,10 @@ pub fn run(request: &Request, outputs: OutputSet) -> Result<Report> {
         _ => None,
     };
     let network = model.pbns()?;
-    let garment = model_frames(network, &body.skeleton, &poses, device);
+    let garment = Frames::new(
+        model_frames(network, &body.skeleton, &poses, device),
+        anim.fps,
+    );
     let lbs = lbs_frames(&model.lbs, &model.garment.positions, &body.skeleton, &poses);
     let geometry = ClothGeometry::new(&model.garment, model.info.fabric.density);
     let under = body_edges_under(&body, &model.garment.positions, UNDER);
@@ -173,13 +177,14 @@ pub fn run(request: &Request, outputs: OutputSet) -> Result<Report> {
     let comparison = Comparison::of(&per_frame.iter().collect::<Vec<_>>(), 2);
     let space = r.space;
     outputs.write(&r.out, |p| {
-        write_cache_in(p, &model.garment, &garment, anim.fps, space)
+        write_cache_in(p, &model.garment, &garment, space)
     })?;
     if let Some(path) = &r.body_out {
-        let frames = lbs_frames(&body.skin, &body.mesh().positions, &body.skeleton, &poses);
-        outputs.write(path, |p| {
-            write_cache_in(p, body.mesh(), &frames, anim.fps, space)
-        })?;
+        let frames = Frames::new(
+            lbs_frames(&body.skin, &body.mesh().positions, &body.skeleton, &poses),
+            anim.fps,
+        );
+        outputs.write(path, |p| write_cache_in(p, body.mesh(), &frames, space))?;
     }
     let view = match &r.view {
         Some(page) => {

@@ -5,6 +5,7 @@
 use crate::body::Body;
 use crate::eval::model_frames;
 use crate::garment::Garment;
+use crate::geometry::Frames;
 use crate::io::gltf_body::read_body;
 use crate::models::file::{self, check_skeleton};
 use crate::motion::{chain, load_clip};
@@ -25,8 +26,8 @@ pub struct Request {
     pub garments: Vec<PathBuf>,
     /// One point cache per garment (with clips).
     pub caches: Vec<PathBuf>,
-    /// The clip frame of each cache's first sample.
-    pub cache_start: usize,
+    /// The clip frame of each cache's first sample; by default the start each cache records.
+    pub cache_start: Option<usize>,
     /// Each cached garment in its own panel.
     pub side_by_side: bool,
     /// Colour cached garments by their distance to this cache.
@@ -67,48 +68,57 @@ pub fn sheet(args: &Request) -> Result<(image::RgbImage, usize)> {
         .iter()
         .map(|p| Garment::read(p))
         .collect::<Result<Vec<_>>>()?;
+    if args.clips.motions.is_empty() && !args.caches.is_empty() {
+        bail!("--cache plays a garment over a clip: add --motion");
+    }
+    let clip = match args.clips.motions.is_empty() {
+        true => None,
+        false => Some(played(args, &body)?),
+    };
+    let fps = clip.as_ref().map_or(0.0, |c| c.0);
+    // A cache of part of the clip (from `interpolate`) records its first frame; --cache-start
+    // overrides it for caches of other tools.
+    let read = |p: &PathBuf, vertices: usize| {
+        let frames = crate::io::point_cache::read_pc2(p, vertices, fps)?;
+        let start = args.cache_start.unwrap_or(frames.start);
+        Ok(frames.starting_at(start))
+    };
     let caches = args
         .caches
         .iter()
         .zip(&garments)
-        .map(|(p, g)| crate::io::point_cache::read_pc2(p, g.mesh.vertex_count()))
+        .map(|(p, g)| read(p, g.mesh.vertex_count()))
         .collect::<Result<Vec<_>>>()?;
-    let poses: Vec<Shown> = if args.clips.motions.is_empty() {
-        if !args.caches.is_empty() {
-            bail!("--cache plays a garment over a clip: add --motion");
+    let poses: Vec<Shown> = match &clip {
+        None => vec![("rest".to_string(), body.skeleton.rest.clone(), 0)],
+        Some((fps, sequence)) => {
+            let fps = *fps;
+            if garments.len() != args.caches.len() {
+                bail!("with --motion each --garment needs its --cache (a point cache from simulate or eval), or a trained model: --model");
+            }
+            // Evenly spaced frames cover what every cache holds.
+            let start = caches.iter().map(|c| c.start).max().unwrap_or(0);
+            let end = caches
+                .iter()
+                .map(|c| c.start + c.len())
+                .fold(sequence.len(), usize::min);
+            let frames = pick_frames(start..end.max(start + 1), args.frames, &args.frame_list)?;
+            frames
+                .iter()
+                .map(|&f| (frame_label(fps, f), sequence[f].clone(), f))
+                .collect()
         }
-        vec![("rest".to_string(), body.skeleton.rest.clone(), 0)]
-    } else {
-        if garments.len() != args.caches.len() {
-            bail!("with --motion each --garment needs its --cache (a point cache from simulate or eval), or a trained model: --model");
-        }
-        let (fps, sequence) = played(args, &body)?;
-        // Evenly spaced frames cover what every cache holds.
-        let start = if caches.is_empty() {
-            0
-        } else {
-            args.cache_start
-        };
-        let end = caches
-            .iter()
-            .map(|c| start + c.len())
-            .fold(sequence.len(), usize::min);
-        let frames = pick_frames(start..end.max(start + 1), args.frames, &args.frame_list)?;
-        frames
-            .iter()
-            .map(|&f| (frame_label(fps, f), sequence[f].clone(), f))
-            .collect()
     };
     for (cache, path) in caches.iter().zip(&args.caches) {
-        check_covers(cache, path, &poses, args.cache_start)?;
+        check_covers(cache, path, &poses)?;
     }
     let reference = match &args.error_vs {
         Some(path) => {
             let Some(first) = garments.first() else {
                 bail!("--error-vs colours cached garments: add --garment and --cache");
             };
-            let frames = crate::io::point_cache::read_pc2(path, first.mesh.vertex_count())?;
-            check_covers(&frames, path, &poses, 0)?;
+            let frames = read(path, first.mesh.vertex_count())?;
+            check_covers(&frames, path, &poses)?;
             Some(frames)
         }
         None => None,
@@ -128,15 +138,15 @@ pub fn sheet(args: &Request) -> Result<(image::RgbImage, usize)> {
             // Only garments of the reference's mesh are coloured.
             reference
                 .as_ref()
-                .filter(|r| r[*frame].len() == points.len())
-                .map(|r| crate::metrics::vertex_distances_mm(points, &r[*frame]))
+                .filter(|r| r[*frame - r.start].len() == points.len())
+                .map(|r| crate::metrics::vertex_distances_mm(points, &r[*frame - r.start]))
         };
         let mut drawn: Vec<Drawn> = garments
             .iter()
             .enumerate()
             .map(|(i, g)| match caches.get(i) {
                 Some(c) => {
-                    let x = &c[*frame - args.cache_start];
+                    let x = &c[*frame - c.start];
                     (x.clone(), i, errors(x))
                 }
                 None => (g.mesh.positions.clone(), i, None),
@@ -274,17 +284,13 @@ type Shown = (String, Vec<JointTransform>, usize);
 
 /// Checks that a cache whose first sample is clip frame `start` holds every drawn frame (index
 /// it by frame − `start`).
-fn check_covers(
-    frames: &[Vec<[f32; 3]>],
-    path: &std::path::Path,
-    poses: &[Shown],
-    start: usize,
-) -> Result<()> {
+fn check_covers(frames: &Frames, path: &std::path::Path, poses: &[Shown]) -> Result<()> {
+    let start = frames.start;
     let first = poses.iter().map(|p| p.2).min().unwrap_or(0);
     let last = poses.iter().map(|p| p.2).max().unwrap_or(0);
     if first < start {
         bail!(
-            "{}: starts at clip frame {start} (--cache-start), frame {first} asked for",
+            "{}: starts at clip frame {start} (its own start, or --cache-start), frame {first} asked for",
             path.display()
         );
     }

@@ -588,7 +588,7 @@ fn roll_clips(
             )?;
             played += end - start;
             garments.extend_from_slice(&s.garment[from..start]);
-            garments.extend(rolled.frames);
+            garments.extend(rolled.frames.into_points());
             for t in start + 1..=end {
                 predicted.push(base + t as i64);
                 for (k, b) in back.iter_mut().enumerate() {

@@ -170,7 +170,8 @@ impl Scene {
                 self.file.display()
             );
         }
-        let frames = read_pc2(path, points)?;
+        // The page plays the cache at the glb's rate (PC2 has none).
+        let frames = read_pc2(path, points, 0.0)?;
         Ok((
             CacheReport {
                 path: path.to_path_buf(),
@@ -182,7 +183,7 @@ impl Scene {
                     .file_stem()
                     .map_or("cache".into(), |s| s.to_string_lossy().into_owned()),
                 point_count: points,
-                points: frames.into_iter().flatten().collect(),
+                points: frames.into_points().into_iter().flatten().collect(),
             },
         ))
     }

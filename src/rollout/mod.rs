@@ -13,7 +13,7 @@ pub mod surface;
 pub mod timing;
 
 use crate::body::Body;
-use crate::geometry::StrainLimit;
+use crate::geometry::{Frames, StrainLimit};
 use crate::models::dynamic::motion::History;
 use crate::models::dynamic::{BodyAnchors, BodyFrames, Dynamic, MeshEdges, MeshLaplacian, Space};
 use crate::models::file::ModelFile;
@@ -131,8 +131,8 @@ pub struct FrameTiming {
 }
 
 pub struct Rollout {
-    /// The garment at every frame (frame 0 is the start).
-    pub frames: Vec<Vec<[f32; 3]>>,
+    /// The garment at every frame (frame 0 is the start, clip frame `first`).
+    pub frames: Frames,
     pub timings: Vec<FrameTiming>,
     /// Collision loss `Σ ReLU(margin − o)` (metres) per frame before and after the fix.
     pub collision_before: Vec<f64>,
@@ -212,7 +212,7 @@ pub fn roll_out(
         (t(lo), t(hi))
     });
     let mut out = Rollout {
-        frames: vec![initial],
+        frames: Frames::new(vec![initial], fps as f32).starting_at(first),
         timings: vec![FrameTiming::default()],
         collision_before: vec![first_fix.before],
         collision_after: vec![first_fix.after],

@@ -1,6 +1,7 @@
 //! Blender as a subprocess: the job folder it reads, the run, and what it hands back.
 
-use super::{Frames, Prepared, Scene, Settings, Simulation};
+use super::{Prepared, Scene, Settings, Simulation};
+use crate::geometry::Frames;
 use crate::geometry::TriMesh;
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
@@ -111,14 +112,12 @@ pub fn job_files(scene: &Scene, prepared: &Prepared, settings: &Settings) -> Res
         Role::Body,
         scene.body.mesh(),
         &prepared.body_frames,
-        prepared.fps,
     )?;
     let garment = mesh_files(
         &mut files,
         Role::Garment,
         &scene.garment.mesh,
         &prepared.garment_targets,
-        prepared.fps,
     )?;
     let job = Job {
         fps: prepared.fps,
@@ -163,7 +162,6 @@ fn mesh_files(
     role: Role,
     mesh: &TriMesh,
     frames: &Frames,
-    fps: f32,
 ) -> Result<MeshFiles> {
     let (name, points, triangles, cache) = match role {
         Role::Body => ("body", "body_points.f32", "body_triangles.u32", "body.pc2"),
@@ -186,7 +184,8 @@ fn mesh_files(
         .flat_map(|i| i.to_le_bytes());
     let pc = exporters::PointCache {
         name: name.into(),
-        fps,
+        fps: frames.fps,
+        start: frames.start,
         triangles: Vec::new(),
         uvs: None,
         point_count: mesh.vertex_count(),
@@ -211,6 +210,7 @@ pub fn run(
     dir: &Path,
     settings: &Settings,
     vertices: usize,
+    fps: f32,
     lead_in: usize,
     on_frame: &dyn Fn(usize),
 ) -> Result<Simulation> {
@@ -250,7 +250,10 @@ pub fn run(
     if let Some(f) = outcome.failure {
         bail!("{}", explosion_message(f.frame, lead_in, &f.reason));
     }
-    let garment = read_frames(&dir.join("garment.f32"), vertices, outcome.frames_done)?;
+    let garment = Frames::new(
+        read_frames(&dir.join("garment.f32"), vertices, outcome.frames_done)?,
+        fps,
+    );
     Ok(Simulation {
         garment,
         blender_version: outcome.blender_version,
@@ -268,7 +271,7 @@ pub fn explosion_message(frame: usize, lead_in: usize, reason: &str) -> String {
     format!("the cloth simulation exploded at {at}: {reason}; nothing written (raise [simulate] quality / collision_quality in the fabric)")
 }
 
-fn read_frames(path: &Path, vertices: usize, frames: usize) -> Result<Frames> {
+fn read_frames(path: &Path, vertices: usize, frames: usize) -> Result<Vec<Vec<[f32; 3]>>> {
     let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
     let want = frames * vertices * 12;
     if bytes.len() != want {

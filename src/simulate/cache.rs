@@ -4,7 +4,7 @@
 //! inputs is read back instead of re-simulated, and an upgrade of either program simulates again.
 
 use super::stats::{FrameStats, Summary};
-use super::Frames;
+use crate::geometry::Frames;
 use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
@@ -49,20 +49,22 @@ fn paths(dir: &Path, key: &str) -> (PathBuf, PathBuf) {
 }
 
 /// The stored simulation, when both its files are there and whole.
-pub fn load(dir: &Path, key: &str, vertices: usize) -> Option<(Frames, Entry)> {
+pub fn load(dir: &Path, key: &str, vertices: usize, fps: f32) -> Option<(Frames, Entry)> {
     let (pc2, json) = paths(dir, key);
     let entry: Entry = serde_json::from_slice(&std::fs::read(json).ok()?).ok()?;
     let (header, frames) = exporters::pc2::read(&std::fs::read(pc2).ok()?).ok()?;
-    (header.points == vertices && frames.len() == entry.summary.frames).then_some((frames, entry))
+    (header.points == vertices && frames.len() == entry.summary.frames)
+        .then_some((Frames::new(frames, fps), entry))
 }
 
 /// Stores a simulation (frames first, so an entry's JSON never names missing frames).
-pub fn store(dir: &Path, key: &str, frames: &Frames, fps: f32, entry: &Entry) -> Result<()> {
+pub fn store(dir: &Path, key: &str, frames: &Frames, entry: &Entry) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let (pc2, json) = paths(dir, key);
     let cache = exporters::PointCache {
         name: key.into(),
-        fps,
+        fps: frames.fps,
+        start: frames.start,
         triangles: Vec::new(),
         uvs: None,
         point_count: frames.first().map_or(0, Vec::len),

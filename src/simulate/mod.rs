@@ -14,13 +14,10 @@ pub mod stats;
 use crate::body::Body;
 use crate::fabric::Fabric;
 use crate::garment::Garment;
-use crate::geometry::PointIndex;
+use crate::geometry::{Frames, PointIndex};
 use crate::rig::{weights, JointTransform, SkelAnimation, Skin};
 use anyhow::{bail, Result};
 use std::path::PathBuf;
-
-/// Per-frame points of one mesh.
-pub type Frames = Vec<Vec<[f32; 3]>>;
 
 /// What is simulated.
 pub struct Scene<'a> {
@@ -92,10 +89,11 @@ pub fn prepare(scene: &Scene, settings: &Settings) -> Result<Prepared> {
     poses.extend((0..count).map(|f| clip.local_pose(f)));
     let skin = garment_lbs(scene.body, scene.garment)?;
     let skinned = |s: &Skin, rest: &[[f32; 3]]| -> Frames {
-        poses
+        let points = poses
             .iter()
             .map(|p| s.skin_points(rest, &skeleton.skinning_matrices(p)))
-            .collect()
+            .collect();
+        Frames::new(points, clip.fps)
     };
     Ok(Prepared {
         body_frames: skinned(&scene.body.skin, &scene.body.mesh().positions),
@@ -157,8 +155,8 @@ pub fn run(
     let key = cache::key(crate::build_id::id(), &blender_version, &files);
     let n = scene.garment.mesh.vertex_count();
     let lead = prepared.lead_in;
-    let clip_body = prepared.body_frames[lead..].to_vec();
-    if let Some((garment, entry)) = cache_dir.and_then(|d| cache::load(d, &key, n)) {
+    let clip_body = Frames::new(prepared.body_frames[lead..].to_vec(), prepared.fps);
+    if let Some((garment, entry)) = cache_dir.and_then(|d| cache::load(d, &key, n, prepared.fps)) {
         return Ok(Outcome {
             garment,
             body: clip_body,
@@ -171,7 +169,9 @@ pub fn run(
     let work = blender::WorkDir::new()?;
     blender::write_job(&work.0, &files)?;
     drop(files);
-    let sim = blender::run(&work.0, settings, n, lead, &|k| on_frame(k, total))?;
+    let sim = blender::run(&work.0, settings, n, prepared.fps, lead, &|k| {
+        on_frame(k, total)
+    })?;
     if sim.simulated_frames != total {
         bail!(
             "Blender simulated {} of {total} frames",
@@ -186,7 +186,7 @@ pub fn run(
         pinned: blender::pinned(scene),
         fps: prepared.fps,
     };
-    let garment = sim.garment[lead..].to_vec();
+    let garment = Frames::new(sim.garment[lead..].to_vec(), prepared.fps);
     let (frames, summary) = stats::of(
         &setup,
         &garment,
@@ -203,7 +203,7 @@ pub fn run(
         frames,
     };
     if let Some(dir) = cache_dir {
-        cache::store(dir, &key, &garment, prepared.fps, &entry)?;
+        cache::store(dir, &key, &garment, &entry)?;
     }
     Ok(Outcome {
         garment,

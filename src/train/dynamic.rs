@@ -12,6 +12,7 @@ use crate::body::Body;
 use crate::fabric::Fabric;
 use crate::garment::Garment;
 use crate::geometry::sdf_grid::SdfGrid;
+use crate::geometry::Frames;
 use crate::geometry::{SurfaceIndex, TriMesh};
 use crate::metrics::deviation::Deviation;
 use crate::models::dynamic::space::Consts;
@@ -33,7 +34,7 @@ use tch::{Device, Kind, Tensor};
 pub struct Sequence {
     pub name: String,
     pub clip: SkelAnimation,
-    pub garment: Vec<Vec<[f32; 3]>>,
+    pub garment: Frames,
 }
 
 impl Sequence {
@@ -48,7 +49,7 @@ impl Sequence {
         vertices: usize,
     ) -> Result<Sequence> {
         let clip = crate::motion::load_clip(motion, maps, body, fps)?.animation;
-        let garment = crate::io::point_cache::read_pc2(sim, vertices)?;
+        let garment = crate::io::point_cache::read_pc2(sim, vertices, clip.fps)?;
         if garment.len() > clip.frame_count() {
             bail!(
                 "{}: {} frames, but {} has {} at {} fps (simulated at another --fps?)",

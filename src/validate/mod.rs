@@ -228,7 +228,7 @@ fn point_cache(
     cache::check_against_clip(
         &cache,
         reference.frames.len(),
-        reference.fps as f64,
+        reference.frames.fps as f64,
         vertices,
         p,
     );

@@ -4,6 +4,7 @@
 //! `eval`'s caches and so would agree with any fault of its own), in mm, every frame.
 
 use crate::bake::skinned_mesh_asset;
+use crate::geometry::Frames;
 use crate::metrics::deviation::{worst_index, Deviation};
 use crate::models::file::ModelFile;
 use crate::preview::{render_panel, save_png, ErrorBands, Framing, Panel, View};
@@ -16,9 +17,9 @@ use tch::Device;
 /// The model's garment over a clip, and how file vertices map onto it.
 pub struct Reference {
     pub clip: String,
-    pub fps: f32,
-    /// `[frame][model vertex]`, world space, metres.
-    pub frames: Vec<Vec<[f32; 3]>>,
+    /// `[frame][model vertex]`, world space, metres, at the clip's rate (0: unknown, the
+    /// file's own rate is taken).
+    pub frames: Frames,
     pub triangles: Vec<[u32; 3]>,
     /// For each vertex of a baked glTF garment, the model vertex it came from (the bake splits
     /// vertices at UV seams; point caches keep the model's order).
@@ -37,25 +38,18 @@ impl Reference {
         let baked = skinned_mesh_asset("garment", &model.garment, None, &network.skin(), [0.0; 3]);
         Ok(Reference {
             clip: clip.name.clone(),
-            fps: clip.fps,
-            frames,
+            frames: Frames::new(frames, clip.fps),
             triangles: model.garment.triangles.clone(),
             baked_vertex: baked.source_vertex,
         })
     }
 
     /// Frames the file must play vertex for vertex (a roll-out just computed, or a cache), at
-    /// `fps` (0: unknown, the file's own rate is taken); `triangles` for the picture.
-    pub fn of_frames(
-        name: &str,
-        frames: Vec<Vec<[f32; 3]>>,
-        fps: f32,
-        triangles: Vec<[u32; 3]>,
-    ) -> Reference {
+    /// their rate (0: unknown, the file's own rate is taken); `triangles` for the picture.
+    pub fn of_frames(name: &str, frames: Frames, triangles: Vec<[u32; 3]>) -> Reference {
         let points = frames.first().map_or(0, Vec::len) as u32;
         Reference {
             clip: name.to_string(),
-            fps,
             frames,
             triangles,
             baked_vertex: (0..points).collect(),
@@ -80,7 +74,8 @@ impl Reference {
             (Some(cache), None) => {
                 let fps = fps.or(cache.fps.map(|f| f as f32)).unwrap_or(0.0);
                 let name = path.file_name().unwrap_or_default().to_string_lossy();
-                Ok(Reference::of_frames(&name, cache.frames, fps, Vec::new()))
+                let frames = Frames::new(cache.frames, fps);
+                Ok(Reference::of_frames(&name, frames, Vec::new()))
             }
             (_, problem) => anyhow::bail!(
                 "{}: the reference is not a sound point cache: {}",
@@ -215,7 +210,7 @@ pub fn replay_gltf(
             reference.frames.len()
         ));
     }
-    let fps = reference.fps as f64;
+    let fps = reference.frames.fps as f64;
     Ok(compare(reference, &map, tolerance_mm, |f| {
         scene.positions(node, Some(animation), f as f64 / fps)
     }))

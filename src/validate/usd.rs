@@ -32,9 +32,14 @@ pub fn replay_usd(
     let (baked, model) = (reference.baked_vertex.len(), reference.vertex_count());
     let frames = reference.frames.len();
     let clip = exporters::usd::identifier(&reference.clip);
-    let played =
-        python_bridge::replay_usd(path, &[baked, model], &clip, reference.fps as f64, frames)
-            .map_err(|e| e.to_string())??;
+    let played = python_bridge::replay_usd(
+        path,
+        &[baked, model],
+        &clip,
+        reference.frames.fps as f64,
+        frames,
+    )
+    .map_err(|e| e.to_string())??;
     if played.samples != frames {
         return Err(format!(
             "{} has {} time samples, the clip {frames} frames (another --fps?)",

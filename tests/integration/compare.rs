@@ -22,13 +22,16 @@ fn run(dir: &Path, perturb: u32) -> (PathBuf, serde_json::Value) {
 }
 
 fn read(path: &Path) -> Vec<Vec<[f32; 3]>> {
-    garmentbake::io::point_cache::read_pc2(path, 2808).unwrap()
+    garmentbake::io::point_cache::read_pc2(path, 2808, 30.0)
+        .unwrap()
+        .into_points()
 }
 
 fn write(path: &Path, frames: &[Vec<[f32; 3]>]) {
     let cache = exporters::PointCache {
         name: "blur".into(),
         fps: 30.0,
+        start: 0,
         triangles: Vec::new(),
         uvs: None,
         point_count: frames[0].len(),

@@ -260,11 +260,15 @@ fn learnt_dynamics_play_closer_than_their_linear_base() {
     eprintln!("training windows rolled out: {base:.3} mm linear, {fitted:.3} mm learnt");
     assert!(fitted < 0.7 * base, "{fit}");
     // Played by `rollout` from the simulation's first frame, no collision fix.
-    let truth = garmentbake::io::point_cache::read_pc2(&sim, 2808).unwrap();
+    let truth = garmentbake::io::point_cache::read_pc2(&sim, 2808, 30.0)
+        .unwrap()
+        .into_points();
     let error = |model: &Path, name: &str| {
         let out = dir.join(name);
         roll_out(model, &sim, &out, &["--no-collision-fix"]);
-        let frames = garmentbake::io::point_cache::read_pc2(&out, 2808).unwrap();
+        let frames = garmentbake::io::point_cache::read_pc2(&out, 2808, 30.0)
+            .unwrap()
+            .into_points();
         let per_frame: Vec<f64> = (1..frames.len())
             .map(|f| {
                 let d: f64 = frames[f]
@@ -539,8 +543,12 @@ fn the_motion_stage_beats_holding_the_shape_and_the_collision_fix_pushes_out() {
     ] {
         assert!(html.contains(track), "{track} not in the page");
     }
-    let frames = garmentbake::io::point_cache::read_pc2(&out, 2808).unwrap();
-    let first = garmentbake::io::point_cache::read_pc2(&sim, 2808).unwrap();
+    let frames = garmentbake::io::point_cache::read_pc2(&out, 2808, 30.0)
+        .unwrap()
+        .into_points();
+    let first = garmentbake::io::point_cache::read_pc2(&sim, 2808, 30.0)
+        .unwrap()
+        .into_points();
     assert_eq!(frames.len(), 6);
     assert!(frames[0] == first[0], "frame 0 is the --init garment");
     let v = &plain["reference"];
@@ -963,7 +971,9 @@ fn settling_hands_the_garment_to_the_pose(dir: &Path, sim: &Path, teacher_mm: f6
         args.extend_from_slice(&["--frames", "6", "--threads", "1", "--no-collision-fix"]);
         let o = garmentbake_in_root(&args);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        garmentbake::io::point_cache::read_pc2(&out, 2808).unwrap()
+        garmentbake::io::point_cache::read_pc2(&out, 2808, 30.0)
+            .unwrap()
+            .into_points()
     };
     let apart = |a: &[Vec<[f32; 3]>], b: &[Vec<[f32; 3]>]| -> f32 {
         a[1..]
@@ -1110,7 +1120,8 @@ fn previews_side_by_side(dir: &Path, sim: &Path, roll: &Path) {
 
 /// `interpolate`: the walk between two frames' latents starts and ends on the space's
 /// reconstructions of those frames (exact for the untrained 64-d space of six frames), has one
-/// sample per clip frame between them, and `preview --cache-start` draws it on the right poses.
+/// sample per clip frame between them, records its first clip frame (PC2's start frame), and
+/// `preview` draws it on the right poses from that start (`--cache-start` overrides it).
 #[test]
 fn a_latent_walk_ends_on_its_frames_and_previews_from_its_start() {
     let (dir, sim, space) = untrained_space("dyn_interpolate");
@@ -1153,6 +1164,10 @@ fn a_latent_walk_ends_on_its_frames_and_previews_from_its_start() {
         assert!(mm < 0.05, "an end of the walk is {mm:.3} mm off its frame");
     }
     assert!(report["latent_distance"].as_f64().unwrap() > 0.0);
+    // The header's start frame, read from the bytes (PC2: f32 at offset 20).
+    let bytes = std::fs::read(&walk).unwrap();
+    let start = f32::from_le_bytes(bytes[20..24].try_into().unwrap());
+    assert_eq!(start, 1.0, "the walk's PC2 starts at clip frame {start}");
     let png = dir.join("walk.png");
     let preview = |extra: &[&str]| {
         let mut a = vec![
@@ -1167,8 +1182,6 @@ fn a_latent_walk_ends_on_its_frames_and_previews_from_its_start() {
             "samples/garments/skirt.obj",
             "--cache",
             walk.to_str().unwrap(),
-            "--cache-start",
-            "1",
             "--views",
             "front",
             "--out",
@@ -1182,7 +1195,10 @@ fn a_latent_walk_ends_on_its_frames_and_previews_from_its_start() {
     assert!(String::from_utf8_lossy(&o.stdout).contains("4 panels"));
     std::fs::remove_file(&png).unwrap();
     let err = one_error_line(&preview(&["--frame-list", "0,2"]), &png);
-    assert!(err.contains("--cache-start"), "{err}");
+    assert!(err.contains("starts at clip frame 1"), "{err}");
+    let o = preview(&["--frame-list", "0,2", "--cache-start", "0"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    std::fs::remove_file(&png).unwrap();
     let never = dir.join("never.pc2");
     let bad = args("4,1", &never);
     let err = one_error_line(

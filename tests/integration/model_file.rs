@@ -74,7 +74,9 @@ fn a_model_written_in_the_previous_format_loads_and_predicts_as_it_did() {
         "a v2 file does not name its build"
     );
     let now = predicted(&file);
-    let then = garmentbake::io::point_cache::read_pc2(&v2_garment(), now[0].len()).unwrap();
+    let then = garmentbake::io::point_cache::read_pc2(&v2_garment(), now[0].len(), 30.0)
+        .unwrap()
+        .into_points();
     assert_eq!(then.len(), 3);
     // The poses move the garment (so the comparison is not of three rest shapes): 0.25 rad
     // turns moved it up to 140 mm from rest here.

@@ -84,7 +84,9 @@ fn a_waist_band_on_a_walking_body_stays_outside_and_pins_follow_within_a_millime
     let short = ["--frames", "8", "--threads", "1"];
     let report = simulate(&band, &pc2, &short);
     let garment = garmentbake::garment::Garment::read(&band).unwrap();
-    let frames = garmentbake::io::point_cache::read_pc2(&pc2, garment.mesh.vertex_count()).unwrap();
+    let frames = garmentbake::io::point_cache::read_pc2(&pc2, garment.mesh.vertex_count(), 30.0)
+        .unwrap()
+        .into_points();
     assert_eq!(frames.len(), 8);
 
     // Inside: our winding number of the posed body, recomputed here from the file.
@@ -216,7 +218,9 @@ fn a_free_patch_falls_half_g_t_squared_along_minus_y_at_any_frame_rate() {
             garmentbake_json(&args)
         };
         assert_eq!(report["lead_in_frames"], 0);
-        let frames = garmentbake::io::point_cache::read_pc2(&pc2, 36).unwrap();
+        let frames = garmentbake::io::point_cache::read_pc2(&pc2, 36, 30.0)
+            .unwrap()
+            .into_points();
         let t = 9.0 / fps.parse::<f64>().unwrap();
         let drop = mean(&frames[0], 1) - mean(&frames[9], 1);
         let expected = 0.5 * 9.81 * t * t;

@@ -134,6 +134,7 @@ fn a_baked_swing_replays_the_network_in_threejs_and_blender() {
     let cache = exporters::PointCache {
         name: "swing".into(),
         fps: 30.0,
+        start: 0,
         triangles: Vec::new(),
         uvs: None,
         point_count: frames[0].len(),

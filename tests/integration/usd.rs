@@ -454,6 +454,7 @@ fn cache_of(body: &Body, anim: &SkelAnimation, frames: usize) -> asset::PointCac
     asset::PointCache {
         name: "body cache".into(),
         fps: anim.fps,
+        start: 0,
         // One UV per point: the face-varying set indexes them as the faces index the points.
         uvs: mesh.uvs.map(|coords| asset::CacheUvs {
             coords,
@@ -613,6 +614,7 @@ fn slow_bench_usd_writer() {
     let cache = asset::PointCache {
         name: "bench".into(),
         fps: 30.0,
+        start: 0,
         triangles: (0..n as u32 - 2).map(|i| [i, i + 1, i + 2]).collect(),
         uvs: Some(asset::CacheUvs {
             coords: (0..n).map(|i| [i as f32 / n as f32, 0.5]).collect(),

@@ -254,7 +254,8 @@ fn network_cache(path: &Path, frames: usize, dx: f32) {
         tch::Device::Cpu,
     );
     x.iter_mut().flatten().for_each(|p| p[0] += dx);
-    garmentbake::io::point_cache::write_cache(path, &file.garment, &x, 10.0).unwrap();
+    let frames = garmentbake::geometry::Frames::new(x, 10.0);
+    garmentbake::io::point_cache::write_cache(path, &file.garment, &frames).unwrap();
 }
 
 #[test]

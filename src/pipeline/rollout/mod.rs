@@ -10,7 +10,7 @@ use crate::bake::compress::Targets;
 use crate::bake::sequence::{bake_sequence, SequenceReport};
 use crate::compute::Compute;
 use crate::eval::lbs_frames;
-use crate::geometry::PointIndex;
+use crate::geometry::{Frames, PointIndex};
 use crate::io::point_cache::{read_pc2, write_cache_in, write_caches_in};
 use crate::metrics::reference_error::{distances_mm, ReferenceError, Simulations};
 use crate::models::file::ModelFile;
@@ -105,8 +105,8 @@ pub fn run(request: &Request, outputs: OutputSet, feedback: &Feedback) -> Result
     let init = match &r.init {
         None => Init::Rest,
         Some(path) => {
-            let frames = read_pc2(path, n)?;
-            match frames.into_iter().next() {
+            let frames = read_pc2(path, n, fps)?;
+            match frames.into_points().into_iter().next() {
                 Some(first) => Init::Moving(vec![first]),
                 None => bail!("{}: the --init cache has no frames", path.display()),
             }
@@ -163,35 +163,36 @@ pub fn run(request: &Request, outputs: OutputSet, feedback: &Feedback) -> Result
         None,
     );
     let body = &file.body;
-    let bodies = (r.body_out.is_some() || r.with_body)
-        .then(|| lbs_frames(&body.skin, &body.mesh().positions, skeleton, &poses));
+    let lbs_clip = |skin: &crate::rig::Skin, rest: &[[f32; 3]]| {
+        Frames::new(lbs_frames(skin, rest, skeleton, &poses), fps)
+    };
+    let bodies =
+        (r.body_out.is_some() || r.with_body).then(|| lbs_clip(&body.skin, &body.mesh().positions));
     let baked = outputs.write(&r.out, |out| match (kind, &bodies) {
         (Some(FileKind::Gltf), _) => {
             write_gltf(r, out, &file, &poses, &rollout.frames, fps, feedback.say).map(Some)
         }
         (_, Some(b)) if r.with_body => {
             let meshes = [
-                ("garment", &file.garment, rollout.frames.as_slice()),
-                ("body", body.mesh(), b.as_slice()),
+                ("garment", &file.garment, &rollout.frames),
+                ("body", body.mesh(), b),
             ];
-            write_caches_in(out, &meshes, fps, r.space).map(|()| None)
+            write_caches_in(out, &meshes, r.space).map(|()| None)
         }
-        _ => write_cache_in(out, &file.garment, &rollout.frames, fps, r.space).map(|()| None),
+        _ => write_cache_in(out, &file.garment, &rollout.frames, r.space).map(|()| None),
     })?;
     let lbs = (r.lbs_out.is_some() || reference.is_some())
         .then(|| {
             let skin = garment_skin(&file)?;
             let rest = &file.garment.positions;
-            Ok::<_, anyhow::Error>(lbs_frames(&skin, rest, skeleton, &poses))
+            Ok::<_, anyhow::Error>(lbs_clip(&skin, rest))
         })
         .transpose()?;
     if let (Some(path), Some(lbs)) = (&r.lbs_out, &lbs) {
-        outputs.write(path, |p| {
-            write_cache_in(p, &file.garment, lbs, fps, r.space)
-        })?;
+        outputs.write(path, |p| write_cache_in(p, &file.garment, lbs, r.space))?;
     }
     if let (Some(path), Some(b)) = (&r.body_out, &bodies) {
-        outputs.write(path, |p| write_cache_in(p, body.mesh(), b, fps, r.space))?;
+        outputs.write(path, |p| write_cache_in(p, body.mesh(), b, r.space))?;
     }
     let view = match &r.view {
         Some(page) => {
@@ -220,15 +221,18 @@ pub fn run(request: &Request, outputs: OutputSet, feedback: &Feedback) -> Result
             let written = Reference::of_frames(
                 "roll-out",
                 rollout.frames.clone(),
-                fps,
                 file.garment.triangles.clone(),
             );
             check_file(&r.out, Some(&written), f64::from(r.tolerance_mm))
                 .map(|c| c.validation(Some("roll-out".into())))
         })
         .transpose()?;
-    let (first, lbs_reference, all) =
-        errors_against_references(&r.references, &references, &rollout.frames, lbs.as_deref());
+    let (first, lbs_reference, all) = errors_against_references(
+        &r.references,
+        &references,
+        &rollout.frames,
+        lbs.as_ref().map(|l| l.as_slice()),
+    );
     Ok(Report {
         motions: r.clips.motions.clone(),
         fps,
@@ -258,7 +262,7 @@ pub fn run(request: &Request, outputs: OutputSet, feedback: &Feedback) -> Result
 /// distance computed once: the first reference's are the ensembles' first).
 fn errors_against_references(
     paths: &[PathBuf],
-    references: &[Vec<Vec<[f32; 3]>>],
+    references: &[Frames],
     rollout: &[Vec<[f32; 3]>],
     lbs: Option<&[Vec<[f32; 3]>]>,
 ) -> (
@@ -375,8 +379,8 @@ fn read_reference(
     vertices: usize,
     (clip, played): (usize, usize),
     fps: f32,
-) -> Result<Vec<Vec<[f32; 3]>>> {
-    let mut frames = read_pc2(path, vertices)?;
+) -> Result<Frames> {
+    let mut frames = read_pc2(path, vertices, fps)?;
     if frames.len() != clip && frames.len() != played {
         bail!(
             "{}: {} frames, the clip has {clip} at {fps} fps (simulated at another rate?)",
