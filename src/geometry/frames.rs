@@ -33,15 +33,6 @@ impl Frames {
         Frames { start, ..self }
     }
 
-    /// The time of `points[0]` in seconds (`start / fps`).
-    pub fn start_seconds(&self) -> f64 {
-        if self.fps > 0.0 {
-            self.start as f64 / self.fps as f64
-        } else {
-            0.0
-        }
-    }
-
     /// The points, giving up the rate and start.
     pub fn into_points(self) -> Vec<Vec<[f32; 3]>> {
         self.points
@@ -68,8 +59,7 @@ mod tests {
     #[test]
     fn a_span_keeps_its_rate_and_reads_as_its_points() {
         let f = Frames::new(vec![vec![[0.0; 3]; 2]; 3], 30.0).starting_at(45);
-        assert_eq!((f.len(), f[0].len(), f.start), (3, 2, 45));
-        assert!((f.start_seconds() - 1.5).abs() < 1e-12);
+        assert_eq!((f.len(), f[0].len(), f.start, f.fps), (3, 2, 45, 30.0));
         let slice: &[Vec<[f32; 3]>] = &f;
         assert_eq!(slice.len(), 3);
     }
