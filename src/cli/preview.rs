@@ -37,8 +37,8 @@ pub struct Args {
     /// `simulate` or `eval`) that poses it.
     #[arg(long = "cache", help_heading = "Inputs")]
     pub caches: Vec<PathBuf>,
-    /// The clip frame of each --cache's (and --error-vs') first sample. By default the start
-    /// frame the cache records (PC2's header: 0 from `simulate` or `eval`, A from `interpolate
+    /// The clip frame of each --cache's first sample (--error-vs keeps its own). By default the
+    /// start frame the cache records (PC2's header: 0 from `simulate` or `eval`, A from `interpolate
     /// --between A,B`); give it for a cache of part of the clip that does not record it.
     #[arg(long, help_heading = "Advanced")]
     pub cache_start: Option<usize>,

@@ -117,7 +117,8 @@ pub fn sheet(args: &Request) -> Result<(image::RgbImage, usize)> {
             let Some(first) = garments.first() else {
                 bail!("--error-vs colours cached garments: add --garment and --cache");
             };
-            let frames = read(path, first.mesh.vertex_count())?;
+            // The reference (a whole simulation) keeps its own start: --cache-start is for --cache.
+            let frames = crate::io::point_cache::read_pc2(path, first.mesh.vertex_count(), fps)?;
             check_covers(&frames, path, &poses)?;
             Some(frames)
         }
