@@ -108,8 +108,8 @@ pub fn write_vat(
     frames: &Frames,
     space: CacheSpace,
 ) -> Result<exporters::vat::Sidecar> {
-    let fps = frames.fps;
     use crate::geometry::normals::vertex_normals;
+    let fps = frames.fps;
     let n = mesh.vertex_count();
     if let Some(f) = frames.iter().position(|f| f.len() != n) {
         bail!("frame {f} has {} points, the mesh {n}", frames[f].len());

@@ -71,9 +71,10 @@ pub fn sheet(args: &Request) -> Result<(image::RgbImage, usize)> {
     if args.clips.motions.is_empty() && !args.caches.is_empty() {
         bail!("--cache plays a garment over a clip: add --motion");
     }
-    let clip = match args.clips.motions.is_empty() {
-        true => None,
-        false => Some(played(args, &body)?),
+    let clip = if args.clips.motions.is_empty() {
+        None
+    } else {
+        Some(played(args, &body)?)
     };
     let fps = clip.as_ref().map_or(0.0, |c| c.0);
     // A cache of part of the clip (from `interpolate`) records its first frame; --cache-start
