@@ -41,21 +41,11 @@ pub fn write_point_caches_in(
         path: path.display().to_string(),
         reason,
     };
-    let first = caches
-        .first()
-        .ok_or_else(|| invalid("no point cache to write".into()))?;
     caches
         .iter()
         .try_for_each(PointCache::check)
+        .and_then(|()| PointCache::same_timeline(caches))
         .map_err(invalid)?;
-    if let Some(c) = caches.iter().find(|c| {
-        c.fps != first.fps || c.start != first.start || c.frame_count() != first.frame_count()
-    }) {
-        return Err(invalid(format!(
-            "point caches '{}' and '{}' do not share a timeline",
-            first.name, c.name
-        )));
-    }
     let spec = spec(caches, space);
     // Into a temporary sibling, renamed at the end: a failed export never leaves a half file.
     replace_via(path, |tmp| {

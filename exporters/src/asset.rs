@@ -252,6 +252,29 @@ pub struct CacheUvs {
 }
 
 impl PointCache {
+    /// Caches written into one file (a USD stage, an Alembic archive) share its rate and frame
+    /// range.
+    pub fn same_timeline(caches: &[PointCache]) -> Result<(), String> {
+        let first = caches.first().ok_or("no point cache to write")?;
+        match caches
+            .iter()
+            .find(|c| c.fps != first.fps || c.start != first.start || c.frame_count() != first.frame_count())
+        {
+            Some(c) => Err(format!(
+                "point caches '{}' ({} frames from frame {} at {} fps) and '{}' ({} from {} at {}) do not share a timeline",
+                first.name,
+                first.frame_count(),
+                first.start,
+                first.fps,
+                c.name,
+                c.frame_count(),
+                c.start,
+                c.fps
+            )),
+            None => Ok(()),
+        }
+    }
+
     pub fn frame_count(&self) -> usize {
         self.points.len().checked_div(self.point_count).unwrap_or(0)
     }

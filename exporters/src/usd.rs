@@ -55,7 +55,7 @@ pub fn write_point_caches_in(
     space: CacheSpace,
 ) -> Result<(), UsdError> {
     check_extension(path)
-        .and_then(|()| same_timeline(caches))
+        .and_then(|()| PointCache::same_timeline(caches))
         .and_then(|()| caches.iter().try_for_each(PointCache::check))
         .map_err(invalid(path))?;
     author(
@@ -63,28 +63,6 @@ pub fn write_point_caches_in(
         &point_caches_spec(caches, &root_name(path), space),
         path,
     )
-}
-
-/// Caches sharing a stage share its rate and frame range.
-fn same_timeline(caches: &[PointCache]) -> Result<(), String> {
-    let first = caches.first().ok_or("no point cache to write")?;
-    match caches
-        .iter()
-        .find(|c| c.fps != first.fps || c.start != first.start || c.frame_count() != first.frame_count())
-    {
-        Some(c) => Err(format!(
-            "point caches '{}' ({} frames from frame {} at {} fps) and '{}' ({} from {} at {}) do not share a timeline",
-            first.name,
-            first.frame_count(),
-            first.start,
-            first.fps,
-            c.name,
-            c.frame_count(),
-            c.start,
-            c.fps
-        )),
-        None => Ok(()),
-    }
 }
 
 /// A reason the input cannot be written to `path`, as the error.

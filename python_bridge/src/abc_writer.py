@@ -29,7 +29,7 @@ def write_point_caches(spec, path):
     archive = Abc.OArchive(path)
     # Sample i at (start + i) / fps, the same frames as the PC2 / USD of the same command.
     sampling = archive.addTimeSampling(
-        AbcCoreAbstract.TimeSampling(1.0 / spec["fps"], spec.get("start", 0) / spec["fps"])
+        AbcCoreAbstract.TimeSampling(1.0 / spec["fps"], spec["start"] / spec["fps"])
     )
     top = archive.getTop()
     frames = spec["frames"]

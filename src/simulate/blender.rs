@@ -120,9 +120,9 @@ pub fn job_files(scene: &Scene, prepared: &Prepared, settings: &Settings) -> Res
         &prepared.garment_targets,
     )?;
     let job = Job {
-        fps: prepared.fps,
+        fps: prepared.fps(),
         frames: prepared.poses.len(),
-        time_scale: 1.0 / (prepared.fps as f64 * BLENDER_FRAME_S),
+        time_scale: 1.0 / (prepared.fps() as f64 * BLENDER_FRAME_S),
         speed_limit: settings.speed_limit,
         pinned: pinned(scene),
         cloth: &scene.fabric.simulate,

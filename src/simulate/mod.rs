@@ -63,7 +63,13 @@ pub struct Prepared {
     pub lead_in: usize,
     pub body_frames: Frames,
     pub garment_targets: Frames,
-    pub fps: f32,
+}
+
+impl Prepared {
+    /// The clip's rate, which every frame sequence here carries.
+    pub fn fps(&self) -> f32 {
+        self.body_frames.fps
+    }
 }
 
 /// Poses the body and the garment's LBS over lead-in + clip.
@@ -100,7 +106,6 @@ pub fn prepare(scene: &Scene, settings: &Settings) -> Result<Prepared> {
         garment_targets: skinned(&skin, &scene.garment.mesh.positions),
         poses,
         lead_in,
-        fps: clip.fps,
     })
 }
 
@@ -155,8 +160,9 @@ pub fn run(
     let key = cache::key(crate::build_id::id(), &blender_version, &files);
     let n = scene.garment.mesh.vertex_count();
     let lead = prepared.lead_in;
-    let clip_body = Frames::new(prepared.body_frames[lead..].to_vec(), prepared.fps);
-    if let Some((garment, entry)) = cache_dir.and_then(|d| cache::load(d, &key, n, prepared.fps)) {
+    let clip_body = Frames::new(prepared.body_frames[lead..].to_vec(), prepared.fps());
+    if let Some((garment, entry)) = cache_dir.and_then(|d| cache::load(d, &key, n, prepared.fps()))
+    {
         return Ok(Outcome {
             garment,
             body: clip_body,
@@ -169,7 +175,7 @@ pub fn run(
     let work = blender::WorkDir::new()?;
     blender::write_job(&work.0, &files)?;
     drop(files);
-    let sim = blender::run(&work.0, settings, n, prepared.fps, lead, &|k| {
+    let sim = blender::run(&work.0, settings, n, prepared.fps(), lead, &|k| {
         on_frame(k, total)
     })?;
     if sim.simulated_frames != total {
@@ -178,15 +184,15 @@ pub fn run(
             sim.simulated_frames
         );
     }
-    stats::check(&sim.garment, prepared.fps, settings.speed_limit, lead)?;
+    stats::check(&sim.garment, prepared.fps(), settings.speed_limit, lead)?;
     let setup = stats::ClipSetup {
         body: scene.body,
         rest: &scene.garment.mesh.positions,
         triangles: &scene.garment.mesh.triangles,
         pinned: blender::pinned(scene),
-        fps: prepared.fps,
+        fps: prepared.fps(),
     };
-    let garment = Frames::new(sim.garment[lead..].to_vec(), prepared.fps);
+    let garment = Frames::new(sim.garment[lead..].to_vec(), prepared.fps());
     let (frames, summary) = stats::of(
         &setup,
         &garment,
