@@ -93,6 +93,26 @@ pub struct HemScore {
     /// Lag of the hem's centroid behind the runs' mean (positive: late), beside each run's
     /// behind the others' ([`HemEnsemble::behind_the_others`]): when the swings come.
     pub behind_the_runs: Option<Lag>,
+    /// The same per part of the swing ([`hem::parts`]): which motion the garment misses.
+    pub parts: Vec<PartScore>,
+}
+
+/// A cache's hem against the simulations', in one part of the swing.
+#[derive(Clone, Debug, Serialize)]
+pub struct PartScore {
+    /// lateral, vertical, forward (the centroid along the waist frame's axes) or shape.
+    pub part: &'static str,
+    pub correlation_with_each: Option<f64>,
+    pub amplitude_ratio: f64,
+}
+
+/// The simulations' hem in one part of the swing: the ceiling and the target.
+#[derive(Clone, Debug, Serialize)]
+pub struct HemPart {
+    pub part: &'static str,
+    pub mutual_correlation: Option<f64>,
+    /// RMS, mean over runs (mm).
+    pub amplitude_mm: f64,
 }
 
 /// The simulations' own hem figures: the ceiling and the targets.
@@ -113,6 +133,8 @@ pub struct HemEnsemble {
     pub behind_the_others: Vec<Option<Lag>>,
     pub amplitude_mm: f64,
     pub spectrum: Vec<hem::Bin>,
+    /// The runs per part of the swing ([`hem::parts`]); their squares add up to the whole's.
+    pub parts: Vec<HemPart>,
 }
 
 /// One cache's figures.
@@ -201,6 +223,31 @@ pub fn compare(inputs: &Inputs, settings: &Settings) -> Result<Report> {
             .map(|(i, j)| hem::correlation(&runs[i], &runs[j]))
             .collect(),
     );
+    let run_parts: Vec<[Trace; 4]> = runs.iter().map(hem::parts).collect();
+    let part_mutual = |p: usize| {
+        mean_of(
+            (0..n)
+                .flat_map(|i| (i + 1..n).map(move |j| (i, j)))
+                .map(|(i, j)| hem::correlation(&run_parts[i][p], &run_parts[j][p]))
+                .collect(),
+        )
+    };
+    let part_amplitude = |p: usize| {
+        run_parts
+            .iter()
+            .map(|r| hem::amplitude_mm(&r[p]))
+            .sum::<f64>()
+            / n as f64
+    };
+    let parts_of_runs: Vec<HemPart> = hem::PARTS
+        .iter()
+        .enumerate()
+        .map(|(p, &part)| HemPart {
+            part,
+            mutual_correlation: part_mutual(p),
+            amplitude_mm: part_amplitude(p),
+        })
+        .collect();
     let others_mean = |i: usize| {
         let others: Vec<&Trace> = (0..n).filter(|&j| j != i).map(|j| &runs[j]).collect();
         hem::mean_trace(&others)
@@ -279,12 +326,28 @@ pub fn compare(inputs: &Inputs, settings: &Settings) -> Result<Report> {
         let r = residual(&cache.frames);
         let centroid = hem::centroid(&r);
         let spectrum = hem::power_spectrum(&r, inputs.fps);
+        let own_parts = hem::parts(&r);
+        let parts = parts_of_runs
+            .iter()
+            .enumerate()
+            .map(|(p, runs)| PartScore {
+                part: runs.part,
+                correlation_with_each: mean_of(
+                    run_parts
+                        .iter()
+                        .map(|s| hem::correlation(&own_parts[p], &s[p]))
+                        .collect(),
+                ),
+                amplitude_ratio: hem::amplitude_mm(&own_parts[p]) / runs.amplitude_mm.max(1e-12),
+            })
+            .collect();
         let hem_score = HemScore {
             correlation_with_mean: hem::correlation(&r, &runs_mean),
             correlation_with_each: mean_of(runs.iter().map(|s| hem::correlation(&r, s)).collect()),
             amplitude_ratio: hem::amplitude_mm(&r) / sims_amplitude.max(1e-12),
             behind_the_runs: behind(&centroid, &runs_mean_centroid),
             swing: swing(&r, &centroid),
+            parts,
         };
         cache_centroids.push(centroid);
         caches.push(CacheReport {
@@ -314,6 +377,7 @@ pub fn compare(inputs: &Inputs, settings: &Settings) -> Result<Report> {
             behind_the_others,
             amplitude_mm: sims_amplitude,
             spectrum: sims_spectrum,
+            parts: parts_of_runs,
         },
         simulations,
         simulations_inside_pct,
@@ -617,6 +681,39 @@ impl std::fmt::Display for Report {
                 lag(&m.swing.lag),
                 lag(&m.behind_the_runs),
                 spectrum(&m.swing.spectrum)
+            )?;
+        }
+        let part = |c: Option<f64>, amplitude: String| format!("{} ({amplitude})", opt(c));
+        writeln!(
+            f,
+            "hem parts, correlation (amplitude): {}",
+            h.parts
+                .iter()
+                .map(|p| p.part)
+                .collect::<Vec<_>>()
+                .join(" / ")
+        )?;
+        writeln!(
+            f,
+            "  {:<12} {} (mutual; mm RMS)",
+            "runs",
+            h.parts
+                .iter()
+                .map(|p| part(p.mutual_correlation, format!("{:.1}", p.amplitude_mm)))
+                .collect::<Vec<_>>()
+                .join(" / ")
+        )?;
+        for c in &r.caches {
+            writeln!(
+                f,
+                "  {:<12} {} (with each run; × the runs')",
+                c.name,
+                c.hem
+                    .parts
+                    .iter()
+                    .map(|p| part(p.correlation_with_each, format!("{:.2}", p.amplitude_ratio)))
+                    .collect::<Vec<_>>()
+                    .join(" / ")
             )?;
         }
         writeln!(

@@ -27,7 +27,9 @@ pub(super) const SHORT_HIDES: [&str; 2] = ["up", "units"];
 /// garment's lowest boundary loop) in the waist frame beyond the --baseline cache (PBNS: what
 /// the pose alone gives), per-vertex time mean removed: correlation with the runs (their mutual
 /// correlation is the ceiling), amplitude ratio, lag behind the pelvis' velocity, power
-/// spectrum; and strain mean / p99, inside the body, jitter. See docs/dynamic.md.
+/// spectrum, and the correlation and amplitude per part of the swing (the hem's centroid
+/// lateral, vertical, forward; its shape); and strain mean / p99, inside the body, jitter. See
+/// docs/dynamic.md.
 #[derive(clap::Args)]
 #[command(after_help = SHORT_HELP_NOTE)]
 #[command(mut_args(short_help(SHORT_HIDES, NO_IDS)))]

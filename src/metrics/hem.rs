@@ -144,6 +144,39 @@ pub fn centroid(r: &Trace) -> Vec<[f64; 3]> {
         .collect()
 }
 
+/// Names of the parts [`parts`] splits a residual into, in its order.
+pub const PARTS: [&str; 4] = ["lateral", "vertical", "forward", "shape"];
+
+/// A residual split into parts: its centroid's motion along the waist frame's x (lateral), y
+/// (vertical) and z (forward) axes, each as a trace whose every vertex carries that one
+/// coordinate, and the shape left when the centroid is taken out (flare, folds, a twist). A
+/// skirt swinging as a whole is in the first three, one rippling in the last. The parts are
+/// orthogonal (the shape sums to zero over the hem), so their mean squares add up to the
+/// residual's and each part's correlations and amplitudes read like the whole's.
+pub fn parts(r: &Trace) -> [Trace; 4] {
+    let c = centroid(r);
+    let axis = |k: usize| -> Trace {
+        r.iter()
+            .zip(&c)
+            .map(|(f, m)| {
+                let mut p = [0.0; 3];
+                p[k] = m[k];
+                vec![p; f.len()]
+            })
+            .collect()
+    };
+    let shape = r
+        .iter()
+        .zip(&c)
+        .map(|(f, m)| {
+            f.iter()
+                .map(|p| std::array::from_fn(|k| p[k] - m[k]))
+                .collect()
+        })
+        .collect();
+    [axis(0), axis(1), axis(2), shape]
+}
+
 /// The pelvis' (root joint's) velocity per frame in its own frame (m/s, central differences,
 /// one-sided at the ends): the body's motion as the garment riding it feels it.
 pub fn pelvis_velocity(waist: &[Matrix4<f32>], fps: f32) -> Vec<[f64; 3]> {
@@ -379,6 +412,46 @@ mod tests {
                 vec![[0.01 * scale * s, 0.0, -0.02 * scale * s]; 3]
             })
             .collect()
+    }
+
+    #[test]
+    fn parts_split_a_swing_from_a_ripple_and_their_squares_add_up() {
+        // Eight hem vertices on a circle: the whole hem swinging forward (z) and bouncing (y),
+        // plus a ripple that moves vertices in and out with no net motion.
+        let around = 8;
+        let r: Trace = (0..100)
+            .map(|t| {
+                let (fwd, up, ripple) = (
+                    0.03 * (t as f64 * 0.2).sin(),
+                    0.01 * (t as f64 * 0.5).cos(),
+                    0.02 * (t as f64 * 0.7).sin(),
+                );
+                (0..around)
+                    .map(|a| {
+                        let angle = std::f64::consts::TAU * a as f64 / around as f64;
+                        let out = ripple * (2.0 * angle).cos();
+                        [out * angle.cos(), up, fwd + out * angle.sin()]
+                    })
+                    .collect()
+            })
+            .collect();
+        let [lateral, vertical, forward, shape] = parts(&r);
+        assert!(amplitude_mm(&lateral) < 1e-9, "{}", amplitude_mm(&lateral));
+        let fwd: Trace = (0..100)
+            .map(|t| vec![[0.0, 0.0, 0.03 * (t as f64 * 0.2).sin()]; around])
+            .collect();
+        assert!((correlation(&forward, &fwd).unwrap() - 1.0).abs() < 1e-9);
+        assert!((amplitude_mm(&forward) - amplitude_mm(&fwd)).abs() < 1e-9);
+        assert!(amplitude_mm(&vertical) > 6.0, "{}", amplitude_mm(&vertical));
+        // The ripple is all shape, uncorrelated with the swing.
+        assert!(amplitude_mm(&shape) > 5.0, "{}", amplitude_mm(&shape));
+        let square = |t: &Trace| amplitude_mm(t).powi(2);
+        let sum = square(&lateral) + square(&vertical) + square(&forward) + square(&shape);
+        assert!(
+            (sum / square(&r) - 1.0).abs() < 1e-9,
+            "{sum} against {}",
+            square(&r)
+        );
     }
 
     #[test]

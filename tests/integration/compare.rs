@@ -178,6 +178,36 @@ fn perturbed_runs_part_and_compare_tells_a_blur_from_a_run() {
         (corr - 1.0).abs() < 1e-6,
         "the blur is the runs' mean: {corr}"
     );
+    // The swing in parts (lateral, vertical, forward, shape): linear in the garment, so the
+    // runs' mean is never larger than the runs in any part, and orthogonal, so the parts'
+    // squares add up to the whole swing's.
+    let parts = |c: &serde_json::Value| c["hem"]["parts"].as_array().unwrap().clone();
+    let runs_parts = r["hem"]["parts"].as_array().unwrap().clone();
+    let names: Vec<&str> = runs_parts
+        .iter()
+        .map(|p| p["part"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["lateral", "vertical", "forward", "shape"]);
+    let whole = f(&b["hem"]["amplitude_ratio"]) * f(&r["hem"]["amplitude_mm"]);
+    let mut sum = 0.0;
+    for (mine, runs) in parts(&b).iter().zip(&runs_parts) {
+        let ratio = f(&mine["amplitude_ratio"]);
+        assert!(
+            ratio <= 1.0 + 1e-9,
+            "blur's {} amplitude ratio {ratio}",
+            mine["part"]
+        );
+        sum += (ratio * f(&runs["amplitude_mm"])).powi(2);
+    }
+    assert!(
+        (sum.sqrt() / whole - 1.0).abs() < 1e-6,
+        "parts {} mm against the whole {whole} mm",
+        sum.sqrt()
+    );
+    // Measured beyond the rerun, the rerun has no part of a swing.
+    assert!(parts(&rerun)
+        .iter()
+        .all(|p| f(&p["amplitude_ratio"]) == 0.0));
     // The runs' mean swings when they do; each run has a timing against the others.
     assert_eq!(b["hem"]["behind_the_runs"]["frames"], 0, "{}", b["hem"]);
     assert_eq!(r["hem"]["behind_the_others"].as_array().unwrap().len(), 3);
