@@ -201,8 +201,11 @@ fn with_motion(mut model: Value, motion: Option<&MotionInfo>) -> Value {
 fn motion_summary(m: &MotionInfo) -> String {
     let settle = m.settle.map_or("not settled".to_string(), |s| {
         format!(
-            "settled towards the pose in {} s (pose ridge {})",
-            s.seconds, s.pose_ridge
+            "settled towards the pose in {} s (pose ridge {}{})",
+            s.seconds,
+            s.pose_ridge,
+            s.pose_explained_pct
+                .map_or(String::new(), |p| format!(", explaining {p:.1} % left out"))
         )
     });
     format!(

@@ -164,6 +164,10 @@ pub struct Settled {
     pub seconds: f64,
     /// The pose regression's relative ridge, chosen by leave-one-clip-out error.
     pub pose_ridge: f64,
+    /// How much of the latents' spread the pose regression explains on training clips left
+    /// out of its fit (%; models from before it: none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pose_explained_pct: Option<f64>,
 }
 
 /// One round of the roll-out-aware fit: the regression's rows after it and the mean vertex

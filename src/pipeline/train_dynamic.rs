@@ -144,8 +144,12 @@ impl Display for Report {
         if let Some(s) = r.settle {
             writeln!(
                 f,
-                "settled towards the pose's garment: a deviation fades to 1/e in {} s (pose regression ridge {})",
-                s.seconds, s.pose_ridge
+                "settled towards the pose's garment: a deviation fades to 1/e in {} s (pose regression ridge {}{})",
+                s.seconds,
+                s.pose_ridge,
+                s.pose_explained_pct.map_or(String::new(), |p| format!(
+                    "; on training clips left out of its fit it explains {p:.1} % of the latents' spread around the mean garment"
+                ))
             )?;
         }
         if let Some((name, e)) = &r.eval_rollout {

@@ -366,13 +366,14 @@ impl MotionTrainer {
         }
         let clip = self.clip_of_rows();
         let ridges = ridge.map_or(POSE_RIDGES.to_vec(), |r| vec![r]);
-        let (pose, pose_ridge) =
+        let (pose, held) =
             PoseRegression::fit_across_clips(&teacher.drive, &teacher.target, &clip, &ridges);
         let keep = keep_per_frame(seconds, self.fps);
         self.encoder_mut().settle_towards(&pose, keep);
         self.info_mut().settle = Some(Settled {
             seconds,
-            pose_ridge,
+            pose_ridge: held.ridge,
+            pose_explained_pct: Some(held.explained_pct),
         });
         Ok(())
     }

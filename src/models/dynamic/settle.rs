@@ -12,6 +12,15 @@ use tch::{Kind, Tensor};
 /// Relative ridges the pose regression chooses from, by leave-one-clip-out error.
 pub const POSE_RIDGES: [f64; 5] = [1e-3, 1e-2, 1e-1, 1.0, 10.0];
 
+/// The ridge a pose regression was fitted with, and how much of the latents' spread around the
+/// training clips' mean it explains on clips left out of the fit (%; 0: no better than the
+/// mean garment, negative: worse).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Held {
+    pub ridge: f64,
+    pub explained_pct: f64,
+}
+
 /// The garment from the pose alone: latents as a linear function of `[1, u_t]`.
 pub struct PoseRegression {
     /// `P` `[L, 1 + D]`.
@@ -43,38 +52,45 @@ impl PoseRegression {
     /// clip. One clip: its halves stand in for clips. A pose regression must hold for clips it
     /// was not fitted on, and which ridge does depends on the garment and the clips (on 131_02
     /// the skirt's best was 0.01, the top's 1: docs/lab/2026-12-05-dynamic-history.md), so it is
-    /// chosen per model, not fixed. A single ridge is simply fitted.
+    /// chosen per model, not fixed (one ridge given: that one). [`Held`] says how much of the
+    /// left-out clips' latents the chosen ridge explains.
     pub fn fit_across_clips(
         drive: &Tensor,
         target: &Tensor,
         clip: &[usize],
         ridges: &[f64],
-    ) -> (PoseRegression, f64) {
-        if let [only] = ridges {
-            return (PoseRegression::fit(drive, target, *only), *only);
-        }
+    ) -> (PoseRegression, Held) {
         let folds = folds(clip);
-        let error = |ridge: f64| -> f64 {
+        let rows = |m: &Tensor, t: &Tensor| t.index(&[Some(m)]);
+        // Sum of squared misses over the left-out clips, of a fit or of the training mean.
+        let miss = |ridge: Option<f64>| -> f64 {
             folds
                 .iter()
                 .map(|held| {
-                    let (train, test) = (held.logical_not(), held);
-                    let fit = PoseRegression::fit(
-                        &drive.index(&[Some(&train)]),
-                        &target.index(&[Some(&train)]),
-                        ridge,
-                    );
-                    let miss =
-                        fit.latent(&drive.index(&[Some(test)])) - target.index(&[Some(test)]);
-                    miss.square().sum(Kind::Double).double_value(&[])
+                    let train = held.logical_not();
+                    let guess = match ridge {
+                        Some(r) => {
+                            PoseRegression::fit(&rows(&train, drive), &rows(&train, target), r)
+                                .latent(&rows(held, drive))
+                        }
+                        None => rows(&train, target).mean_dim(0, true, Kind::Float),
+                    };
+                    (guess - rows(held, target))
+                        .square()
+                        .sum(Kind::Double)
+                        .double_value(&[])
                 })
                 .sum()
         };
-        let errors: Vec<f64> = ridges.iter().map(|&r| error(r)).collect();
-        let best = ridges[(0..ridges.len())
+        let errors: Vec<f64> = ridges.iter().map(|&r| miss(Some(r))).collect();
+        let best = (0..ridges.len())
             .min_by(|&a, &b| errors[a].total_cmp(&errors[b]))
-            .expect("at least one ridge")];
-        (PoseRegression::fit(drive, target, best), best)
+            .expect("at least one ridge");
+        let held = Held {
+            ridge: ridges[best],
+            explained_pct: 100.0 * (1.0 - errors[best] / miss(None).max(1e-300)),
+        };
+        (PoseRegression::fit(drive, target, held.ridge), held)
     }
 
     /// The latents the pose alone predicts `[F, L]` for `drive [F, D]`.
@@ -144,13 +160,16 @@ mod tests {
         let noise = Tensor::randn([24, 3], (Kind::Float, Device::Cpu));
         let target = with_constant(&drive).matmul(&truth.tr()) + noise;
         let clip: Vec<usize> = (0..24).map(|i| i / 12).collect();
-        let (_, ridge) = PoseRegression::fit_across_clips(&drive, &target, &clip, &[1e-6, 10.0]);
-        assert_eq!(ridge, 10.0);
+        let (_, held) = PoseRegression::fit_across_clips(&drive, &target, &clip, &[1e-6, 10.0]);
+        assert_eq!(held.ridge, 10.0);
+        // Mostly noise: the fit explains little of the clip left out.
+        assert!(held.explained_pct < 20.0, "{held:?}");
         // Noise-free and well determined, the exact map wins.
         let drive = drive.narrow(1, 0, 4);
         let target = with_constant(&drive).matmul(&truth.narrow(1, 0, 5).tr());
-        let (_, ridge) = PoseRegression::fit_across_clips(&drive, &target, &clip, &[1e-6, 10.0]);
-        assert_eq!(ridge, 1e-6);
+        let (_, held) = PoseRegression::fit_across_clips(&drive, &target, &clip, &[1e-6, 10.0]);
+        assert_eq!(held.ridge, 1e-6);
+        assert!(held.explained_pct > 99.9, "{held:?}");
         assert_eq!(folds(&[0; 6]).len(), 2, "one clip: its halves");
     }
 
