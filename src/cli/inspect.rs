@@ -199,15 +199,7 @@ fn with_motion(mut model: Value, motion: Option<&MotionInfo>) -> Value {
 
 /// The motion stage's integrator in one line: how it was fitted and settled.
 fn motion_summary(m: &MotionInfo) -> String {
-    let settle = m.settle.map_or("not settled".to_string(), |s| {
-        format!(
-            "settled towards the pose in {} s (pose ridge {}{})",
-            s.seconds,
-            s.pose_ridge,
-            s.pose_explained_pct
-                .map_or(String::new(), |p| format!(", explaining {p:.1} % left out"))
-        )
-    });
+    let settle = m.settle.map_or("not settled".to_string(), |s| s.summary());
     format!(
         "integrator ridge {}, {} roll-out round(s), body drive on {} joint(s), {settle}",
         m.ridge,

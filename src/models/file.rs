@@ -170,6 +170,19 @@ pub struct Settled {
     pub pose_explained_pct: Option<f64>,
 }
 
+impl Settled {
+    /// In a few words, as `inspect` prints it.
+    pub fn summary(&self) -> String {
+        format!(
+            "settled towards the pose in {} s (pose ridge {}{})",
+            self.seconds,
+            self.pose_ridge,
+            self.pose_explained_pct
+                .map_or(String::new(), |p| format!(", explaining {p:.1} % left out"))
+        )
+    }
+}
+
 /// One round of the roll-out-aware fit: the regression's rows after it and the mean vertex
 /// error of the round's roll-outs of the training clips (before its refit).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

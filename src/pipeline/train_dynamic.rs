@@ -343,7 +343,13 @@ impl Request {
             drive_ridge: self.drive_ridge,
         };
         let fps = info.fps as f64;
-        let mut trainer = MotionTrainer::new(file, data, fps, settings)?;
+        let bar =
+            crate::progress::bar(2 * data.len() as u64, "encoding frames", feedback.hide_bars);
+        let mut trainer = MotionTrainer::new(file, data, fps, settings, &mut |done, total| {
+            bar.set_length(total as u64);
+            bar.set_position(done as u64);
+        })?;
+        bar.finish_and_clear();
         if self.resume {
             trainer.resume(&crate::train::checkpoint_path(&self.out))?;
         }

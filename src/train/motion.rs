@@ -71,9 +71,18 @@ fn static_inputs(
     garments: &Tensor,
     history: &[Tensor; 3],
     fps: f64,
+    progress: &mut dyn FnMut(usize),
 ) -> StaticInputs {
     let all = Tensor::arange(data.len() as i64, (Kind::Int64, data.garment.device()));
-    inputs_at(space, data, (garments, history), history, &all, fps)
+    inputs_at(
+        space,
+        data,
+        (garments, history),
+        history,
+        &all,
+        fps,
+        progress,
+    )
 }
 
 /// The frozen space's inputs of frames `frames`, their garment histories `back[k][i]` (the
@@ -85,6 +94,7 @@ fn inputs_at(
     history: &[Tensor; 3],
     frames: &Tensor,
     fps: f64,
+    progress: &mut dyn FnMut(usize),
 ) -> StaticInputs {
     let count = frames.size()[0];
     let mut parts = Vec::new();
@@ -94,6 +104,7 @@ fn inputs_at(
         let chunk = back.each_ref().map(|b| b.narrow(0, start, n));
         let h = history_of(data, garments, chunk, history, &idx, fps);
         parts.push(StaticInputs::new(space, &h));
+        progress((start + n) as usize);
     }
     let cat =
         |f: fn(&StaticInputs) -> &Tensor| Tensor::cat(&parts.iter().map(f).collect::<Vec<_>>(), 0);
@@ -194,11 +205,14 @@ impl Rows {
 
 impl MotionTrainer {
     /// Grows `file` (a dynamic model with its space trained) a motion encoder.
+    /// `progress(done, total)` while every frame is encoded (twice: its latent, then its step's
+    /// inputs; minutes on a many-take set).
     pub fn new(
         mut file: ModelFile,
         data: FrameData,
         fps: f64,
         settings: Settings,
+        progress: &mut dyn FnMut(usize, usize),
     ) -> Result<MotionTrainer> {
         if data.len() < 2 || settings.batch == 0 {
             bail!("nothing to train on: the motion encoder needs clips of at least two frames and a positive --batch");
@@ -215,11 +229,15 @@ impl MotionTrainer {
         let fps = fps.max(1.0);
         let space = &dynamic.space;
         let history = history_indices(&data, device);
+        let total = 2 * data.len();
         let latents = crate::models::predict_chunks(data.len(), |start, n| {
             let (g, b, m) = data.batch(&data.range(start, n));
+            progress(start + n, total);
             space.encode(&g, &b, &m)
         });
-        let statics = static_inputs(space, &data, &data.garment, &history, fps);
+        let statics = static_inputs(space, &data, &data.garment, &history, fps, &mut |done| {
+            progress(data.len() + done, total)
+        });
         let frames = Tensor::from_slice(&predicted_frames(&data)).to_device(device);
         let mut encoder = encoder;
         let fitted = statics.select(&frames);
@@ -328,6 +346,7 @@ impl MotionTrainer {
                 &self.history,
                 &self.frames,
                 self.fps,
+                &mut |_| {},
             );
             self.rows.push(Rows {
                 target: self.latents.index_select(0, &self.frames),

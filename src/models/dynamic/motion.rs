@@ -198,7 +198,9 @@ impl StaticInputs {
             let bs = h.garment[0].size()[0];
             let (previous_latent, inertia) = Self::split(&z, bs);
             StaticInputs {
-                static_features: features.narrow(0, 0, bs),
+                // A copy, not a view: a view would keep all three maps alive (3× the memory
+                // when a trainer holds every frame's).
+                static_features: features.narrow(0, 0, bs).copy(),
                 previous_latent,
                 inertia,
             }
