@@ -217,18 +217,21 @@ pub fn compare(inputs: &Inputs, settings: &Settings) -> Result<Report> {
         let v: Vec<f64> = v.into_iter().flatten().collect();
         (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
     };
+    let pairs: Vec<(usize, usize)> = (0..n)
+        .flat_map(|i| (i + 1..n).map(move |j| (i, j)))
+        .collect();
     let mutual = mean_of(
-        (0..n)
-            .flat_map(|i| (i + 1..n).map(move |j| (i, j)))
-            .map(|(i, j)| hem::correlation(&runs[i], &runs[j]))
+        pairs
+            .iter()
+            .map(|&(i, j)| hem::correlation(&runs[i], &runs[j]))
             .collect(),
     );
     let run_parts: Vec<[Trace; 4]> = runs.iter().map(hem::parts).collect();
     let part_mutual = |p: usize| {
         mean_of(
-            (0..n)
-                .flat_map(|i| (i + 1..n).map(move |j| (i, j)))
-                .map(|(i, j)| hem::correlation(&run_parts[i][p], &run_parts[j][p]))
+            pairs
+                .iter()
+                .map(|&(i, j)| hem::correlation(&run_parts[i][p], &run_parts[j][p]))
                 .collect(),
         )
     };

@@ -16,7 +16,7 @@ pub const POSE_RIDGES: [f64; 5] = [1e-3, 1e-2, 1e-1, 1.0, 10.0];
 /// training clips' mean it explains on clips left out of the fit (%; 0: no better than the
 /// mean garment, negative: worse).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Held {
+pub struct HeldOut {
     pub ridge: f64,
     pub explained_pct: f64,
 }
@@ -52,30 +52,30 @@ impl PoseRegression {
     /// clip. One clip: its halves stand in for clips. A pose regression must hold for clips it
     /// was not fitted on, and which ridge does depends on the garment and the clips (on 131_02
     /// the skirt's best was 0.01, the top's 1: docs/lab/2026-12-05-dynamic-history.md), so it is
-    /// chosen per model, not fixed (one ridge given: that one). [`Held`] says how much of the
+    /// chosen per model, not fixed (one ridge given: that one). [`HeldOut`] says how much of the
     /// left-out clips' latents the chosen ridge explains.
     pub fn fit_across_clips(
         drive: &Tensor,
         target: &Tensor,
         clip: &[usize],
         ridges: &[f64],
-    ) -> (PoseRegression, Held) {
+    ) -> (PoseRegression, HeldOut) {
         let folds = folds(clip);
         let rows = |m: &Tensor, t: &Tensor| t.index(&[Some(m)]);
         // Sum of squared misses over the left-out clips, of a fit or of the training mean.
         let miss = |ridge: Option<f64>| -> f64 {
             folds
                 .iter()
-                .map(|held| {
-                    let train = held.logical_not();
+                .map(|fold| {
+                    let train = fold.logical_not();
                     let guess = match ridge {
                         Some(r) => {
                             PoseRegression::fit(&rows(&train, drive), &rows(&train, target), r)
-                                .latent(&rows(held, drive))
+                                .latent(&rows(fold, drive))
                         }
                         None => rows(&train, target).mean_dim(0, true, Kind::Float),
                     };
-                    (guess - rows(held, target))
+                    (guess - rows(fold, target))
                         .square()
                         .sum(Kind::Double)
                         .double_value(&[])
@@ -86,7 +86,7 @@ impl PoseRegression {
         let best = (0..ridges.len())
             .min_by(|&a, &b| errors[a].total_cmp(&errors[b]))
             .expect("at least one ridge");
-        let held = Held {
+        let held = HeldOut {
             ridge: ridges[best],
             explained_pct: 100.0 * (1.0 - errors[best] / miss(None).max(1e-300)),
         };
