@@ -98,7 +98,9 @@ pub struct Args {
     /// start, a swing, a drift — fades to 1/e in this time: roll-outs follow a known start for
     /// the first frames and cannot run away over long shots. Longer: more of the history's
     /// motion kept, more room to drift; 0: the pose alone. The regression's ridge is chosen
-    /// leaving one training clip out. Implies --body-drive.
+    /// leaving one training clip out, and the output says how much of a left-out clip's latents
+    /// it explains (0.3 % on the 26-take set: in practice the mean garment, the pose acting
+    /// through the space's skinning). Implies --body-drive.
     #[arg(long, default_value_t = 0.3, value_name = "SECONDS", value_parser = super::args::non_negative::<f64>(), help_heading = "Training")]
     pub pose_settle: f64,
     /// Stage dynamic: no settling, the paper's integrator alone (with --rollout-rounds 3 by
