@@ -226,7 +226,11 @@ pub fn compare(inputs: &Inputs, settings: &Settings) -> Result<Report> {
             .map(|&(i, j)| hem::correlation(&runs[i], &runs[j]))
             .collect(),
     );
-    let run_parts: Vec<[Trace; 4]> = runs.iter().map(hem::parts).collect();
+    let run_parts: Vec<[Trace; 4]> = runs
+        .iter()
+        .zip(&run_centroids)
+        .map(|(r, c)| hem::parts(r, c))
+        .collect();
     let part_mutual = |p: usize| {
         mean_of(
             pairs
@@ -329,7 +333,7 @@ pub fn compare(inputs: &Inputs, settings: &Settings) -> Result<Report> {
         let r = residual(&cache.frames);
         let centroid = hem::centroid(&r);
         let spectrum = hem::power_spectrum(&r, inputs.fps);
-        let own_parts = hem::parts(&r);
+        let own_parts = hem::parts(&r, &centroid);
         let parts = parts_of_runs
             .iter()
             .enumerate()

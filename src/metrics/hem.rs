@@ -152,12 +152,12 @@ pub const PARTS: [&str; 4] = ["lateral", "vertical", "forward", "shape"];
 /// coordinate, and the shape left when the centroid is taken out (flare, folds, a twist). A
 /// skirt swinging as a whole is in the first three, one rippling in the last. The parts are
 /// orthogonal (the shape sums to zero over the hem), so their mean squares add up to the
-/// residual's and each part's correlations and amplitudes read like the whole's.
-pub fn parts(r: &Trace) -> [Trace; 4] {
-    let c = centroid(r);
+/// residual's and each part's correlations and amplitudes read like the whole's. `c` is the
+/// residual's [`centroid`] (callers have it already).
+pub fn parts(r: &Trace, c: &[[f64; 3]]) -> [Trace; 4] {
     let axis = |k: usize| -> Trace {
         r.iter()
-            .zip(&c)
+            .zip(c)
             .map(|(f, m)| {
                 let mut p = [0.0; 3];
                 p[k] = m[k];
@@ -167,7 +167,7 @@ pub fn parts(r: &Trace) -> [Trace; 4] {
     };
     let shape = r
         .iter()
-        .zip(&c)
+        .zip(c)
         .map(|(f, m)| {
             f.iter()
                 .map(|p| std::array::from_fn(|k| p[k] - m[k]))
@@ -435,7 +435,7 @@ mod tests {
                     .collect()
             })
             .collect();
-        let [lateral, vertical, forward, shape] = parts(&r);
+        let [lateral, vertical, forward, shape] = parts(&r, &centroid(&r));
         assert!(amplitude_mm(&lateral) < 1e-9, "{}", amplitude_mm(&lateral));
         let fwd: Trace = (0..100)
             .map(|t| vec![[0.0, 0.0, 0.03 * (t as f64 * 0.2).sin()]; around])
