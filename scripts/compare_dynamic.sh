@@ -61,8 +61,8 @@ for c in d["caches"]:
     print(f"{c['name']:10} {own['clip']:7.1f} {own['first_50']:6.1f} {' '.join(e)} {r if r is None else round(r, 2)!s:>6} {hem['amplitude_ratio']:5.2f} {late(hem.get('behind_the_runs'))} {p['strain_mean_pct']:6.1f}% {p['strain_p99_pct']:5.0f}% {c['inside_pct']:6.3f}%")
 num = lambda x: "   -" if x is None else f"{x:4.2f}"
 parts = d["hem"]["parts"]
-print("hem parts, correlation (amplitude): " + " / ".join(q["part"] for q in parts))
+print("hem parts, correlation (amplitude, behind the runs): " + " / ".join(q["part"] for q in parts))
 print(f"{'runs':10} " + " / ".join(f"{num(q['mutual_correlation'])} ({q['amplitude_mm']:.0f} mm)" for q in parts))
 for c in d["caches"]:
-    print(f"{c['name']:10} " + " / ".join(f"{num(q['correlation_with_each'])} ({q['amplitude_ratio']:.2f})" for q in c["hem"]["parts"]))
+    print(f"{c['name']:10} " + " / ".join(f"{num(q['correlation_with_each'])} ({q['amplitude_ratio']:.2f}, {late(q.get('behind_the_runs')).strip()} s)" for q in c["hem"]["parts"]))
 PY

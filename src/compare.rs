@@ -104,6 +104,9 @@ pub struct PartScore {
     pub part: &'static str,
     pub correlation_with_each: Option<f64>,
     pub amplitude_ratio: f64,
+    /// This part behind the runs' mean part (positive: late), every hem vertex's coordinates
+    /// pooled: when it comes, beside how much of it.
+    pub behind_the_runs: Option<Lag>,
 }
 
 /// The simulations' hem in one part of the swing: the ceiling and the target.
@@ -246,6 +249,9 @@ pub fn compare(inputs: &Inputs, settings: &Settings) -> Result<Report> {
             .sum::<f64>()
             / n as f64
     };
+    let runs_mean_parts: Vec<Trace> = (0..hem::PARTS.len())
+        .map(|p| hem::mean_trace(&run_parts.iter().map(|r| &r[p]).collect::<Vec<_>>()))
+        .collect();
     let parts_of_runs: Vec<HemPart> = hem::PARTS
         .iter()
         .enumerate()
@@ -346,6 +352,12 @@ pub fn compare(inputs: &Inputs, settings: &Settings) -> Result<Report> {
                         .collect(),
                 ),
                 amplitude_ratio: hem::amplitude_mm(&own_parts[p]) / runs.amplitude_mm.max(1e-12),
+                behind_the_runs: hem::trace_lag(
+                    &own_parts[p],
+                    &runs_mean_parts[p],
+                    max_lag,
+                    inputs.fps,
+                ),
             })
             .collect();
         let hem_score = HemScore {
@@ -691,6 +703,9 @@ impl std::fmt::Display for Report {
             )?;
         }
         let part = |c: Option<f64>, amplitude: String| format!("{} ({amplitude})", opt(c));
+        let late = |l: &Option<crate::metrics::hem::Lag>| {
+            l.map_or("—".to_string(), |l| format!("{:+.2} s", l.seconds))
+        };
         writeln!(
             f,
             "hem parts, correlation (amplitude): {}",
@@ -713,12 +728,15 @@ impl std::fmt::Display for Report {
         for c in &r.caches {
             writeln!(
                 f,
-                "  {:<12} {} (with each run; × the runs')",
+                "  {:<12} {} (with each run; × the runs', behind them)",
                 c.name,
                 c.hem
                     .parts
                     .iter()
-                    .map(|p| part(p.correlation_with_each, format!("{:.2}", p.amplitude_ratio)))
+                    .map(|p| part(
+                        p.correlation_with_each,
+                        format!("{:.2}, {}", p.amplitude_ratio, late(&p.behind_the_runs))
+                    ))
                     .collect::<Vec<_>>()
                     .join(" / ")
             )?;

@@ -212,17 +212,44 @@ pub struct Lag {
 /// horizontal axes (x, z: the swing; the vertical is the hem's bounce), means removed. `None`
 /// for a still drive or response.
 pub fn lag(response: &[[f64; 3]], drive: &[[f64; 3]], max: usize, fps: f32) -> Option<Lag> {
-    let n = response.len().min(drive.len());
-    if n < 4 {
+    let axes = |s: &[[f64; 3]]| -> Vec<Vec<f64>> {
+        [0usize, 2]
+            .iter()
+            .map(|&k| s.iter().map(|p| p[k]).collect())
+            .collect()
+    };
+    lag_of_channels(&axes(response), &axes(drive), max, fps)
+}
+
+/// [`lag`] of a whole trace behind another, every vertex coordinate a channel: when a part of
+/// the swing ([`parts`]) comes against the runs'.
+pub fn trace_lag(response: &Trace, drive: &Trace, max: usize, fps: f32) -> Option<Lag> {
+    let channels = |t: &Trace| -> Vec<Vec<f64>> {
+        let width = t.first().map_or(0, |f| f.len());
+        (0..width * 3)
+            .map(|c| t.iter().map(|f| f[c / 3][c % 3]).collect())
+            .collect()
+    };
+    lag_of_channels(&channels(response), &channels(drive), max, fps)
+}
+
+/// The lag over channels (each a series over frames) pooled into one correlation.
+fn lag_of_channels(response: &[Vec<f64>], drive: &[Vec<f64>], max: usize, fps: f32) -> Option<Lag> {
+    let n = response
+        .iter()
+        .chain(drive)
+        .map(Vec::len)
+        .min()
+        .unwrap_or(0);
+    if n < 4 || response.len() != drive.len() {
         return None;
     }
-    let axes = [0usize, 2];
-    let centred = |s: &[[f64; 3]], k: usize| {
-        let m = s[..n].iter().map(|p| p[k]).sum::<f64>() / n as f64;
-        s[..n].iter().map(|p| p[k] - m).collect::<Vec<_>>()
+    let centred = |s: &Vec<f64>| {
+        let m = s[..n].iter().sum::<f64>() / n as f64;
+        s[..n].iter().map(|x| x - m).collect::<Vec<_>>()
     };
-    let r: Vec<Vec<f64>> = axes.iter().map(|&k| centred(response, k)).collect();
-    let d: Vec<Vec<f64>> = axes.iter().map(|&k| centred(drive, k)).collect();
+    let r: Vec<Vec<f64>> = response.iter().map(centred).collect();
+    let d: Vec<Vec<f64>> = drive.iter().map(centred).collect();
     let max = max.min(n / 2) as i64;
     let at = |tau: i64| {
         // Drive frames t whose response frame t + τ exists.
@@ -474,6 +501,10 @@ mod tests {
         assert_eq!(l.frames, 7, "{l:?}");
         assert!(l.correlation < -0.9, "{l:?}");
         assert!((l.seconds - 7.0 / 30.0).abs() < 1e-12);
+        // The same on whole traces, every vertex a channel: 4 frames early.
+        let early = trace_lag(&swing(200, -4, 1.0), &a, 30, 30.0).unwrap();
+        assert_eq!(early.frames, -4, "{early:?}");
+        assert!(early.correlation > 0.9, "{early:?}");
         // 0.21 rad per frame at 30 fps: 1.003 Hz; the bin nearest it holds the peak.
         let pure: Trace = (0..300)
             .map(|t| vec![[0.01 * (t as f64 * 0.21).sin(), 0.0, 0.0]])

@@ -204,6 +204,12 @@ fn perturbed_runs_part_and_compare_tells_a_blur_from_a_run() {
         "parts {} mm against the whole {whole} mm",
         sum.sqrt()
     );
+    // Each part of the blur comes when the runs' mean part does (it is that mean).
+    for mine in parts(&b) {
+        let behind = &mine["behind_the_runs"];
+        assert_eq!(behind["frames"], 0, "blur's {}: {behind}", mine["part"]);
+        assert!(f(&behind["correlation"]) > 0.999, "{behind}");
+    }
     // Measured beyond the rerun, the rerun has no part of a swing.
     assert!(parts(&rerun)
         .iter()
