@@ -77,10 +77,11 @@ pub struct Args {
     /// Initial Adam learning rate, cosine decay to a tenth (space 3e-4, dynamic 1e-3).
     #[arg(long, value_parser = super::args::positive::<f64>(), help_heading = "Advanced")]
     pub lr: Option<f64>,
-    /// Stage dynamic: pull of the fitted latent integrator towards keeping the previous latent
-    /// (relative ridge penalty); stronger is steadier over long roll-outs, weaker follows the
-    /// simulation closer one step ahead.
-    #[arg(long, default_value_t = 0.1, value_parser = super::args::non_negative::<f64>(), help_heading = "Advanced")]
+    /// Stage dynamic: pull of the fitted latent integrator towards keeping the previous latent,
+    /// relative to each input's own spread (the garment going on at its own velocity, the body
+    /// moving under it, the state itself); stronger is steadier over long roll-outs, weaker
+    /// follows the simulation closer one step ahead.
+    #[arg(long, default_value_t = 0.01, value_parser = super::args::non_negative::<f64>(), help_heading = "Advanced")]
     pub ridge: f64,
     /// Stage dynamic: rounds of roll-out-aware fitting. Each round rolls the model out over the
     /// training clips (no collision fix) and refits the latent integrator on those self-made
@@ -101,7 +102,7 @@ pub struct Args {
     /// leaving one training clip out, and the output says how much of a left-out clip's latents
     /// it explains (0.3 % on the 26-take set: in practice the mean garment, the pose acting
     /// through the space's skinning). Implies --body-drive.
-    #[arg(long, default_value_t = 0.3, value_name = "SECONDS", value_parser = super::args::non_negative::<f64>(), help_heading = "Training")]
+    #[arg(long, default_value_t = 1.0, value_name = "SECONDS", value_parser = super::args::non_negative::<f64>(), help_heading = "Training")]
     pub pose_settle: f64,
     /// Stage dynamic: no settling, the paper's integrator alone (with --rollout-rounds 3 by
     /// default to keep it stable).

@@ -515,10 +515,16 @@ impl MotionEncoder {
     }
 
     /// Fits the linear path to frames' inputs and their simulated latents `target [F, L]` by
-    /// ridge regression towards "keep the previous latent" (its starting value): the penalty on
-    /// the latent columns is `ridge` times their mean square, on each drive column
-    /// `drive_ridge` times its own (the drive's units differ: radians, m/s). A stronger pull
-    /// trades one-step accuracy for a roll-out that does not amplify its own errors.
+    /// ridge regression towards its current value (at first "keep the previous latent"). The
+    /// fit runs in the basis of what each input adds, `[Z^ball − Z^stay, Z^stay − Z_{t−1},
+    /// Z_{t−1}]`: the garment going on at its own velocity, the body moving under it, and the
+    /// state they start from. Each block's penalty is `ridge` times its own mean square (the
+    /// constant's that of `Z_{t−1}`), each drive column's `drive_ridge` times its own (radians,
+    /// m/s). One penalty for the three plain inputs, scaled by their joint mean square, shrank
+    /// the two motion terms (their mean square a fifth of the state's on the skirt) about five
+    /// times harder than the state, and the swing came out damped and late
+    /// (docs/lab/2026-12-07-ridge-by-block-and-a-slower-settle.md). A stronger pull trades
+    /// one-step accuracy for a roll-out that does not amplify its own errors.
     pub fn init_linear(
         &mut self,
         inertia: &Tensor,
@@ -529,24 +535,76 @@ impl MotionEncoder {
         drive_ridge: f64,
     ) {
         tch::no_grad(|| {
-            let x = Self::linear_input(inertia, previous, drive).to_kind(Kind::Double);
+            let l = previous.size()[1];
+            let double = |t: &Tensor| t.to_kind(Kind::Double);
+            let (ball, stay) = (inertia.narrow(1, 0, l), inertia.narrow(1, l, l));
+            let x = double(&Tensor::cat(
+                &[&ball - &stay, &stay - previous, previous.shallow_clone()],
+                1,
+            ));
+            let x = Tensor::cat(
+                &[
+                    x,
+                    double(&previous.ones_like().narrow(1, 0, 1)),
+                    double(drive),
+                ],
+                1,
+            );
             let gram = x.tr().matmul(&x);
             let diagonal = gram.diagonal(0, 0, 1);
-            let own = 3 * previous.size()[1] + 1;
-            let latent_mean = diagonal.narrow(0, 0, own).mean(Kind::Double);
+            let block = |i: i64, n: i64| {
+                diagonal
+                    .narrow(0, i * l, l)
+                    .mean(Kind::Double)
+                    .expand([n], false)
+            };
+            let state = diagonal.narrow(0, 2 * l, l).mean(Kind::Double);
             // A joint the clips never turn about an axis gives a zero column: a floor keeps
             // the system solvable (its weight stays at zero).
             let drive_columns = diagonal
-                .narrow(0, own, drive.size()[1])
-                .maximum(&(&latent_mean * 1e-6))
+                .narrow(0, 3 * l + 1, drive.size()[1])
+                .maximum(&(&state * 1e-6))
                 * drive_ridge;
             let penalty = Tensor::cat(
-                &[latent_mean.expand([own], false) * ridge, drive_columns],
+                &[
+                    block(0, l) * ridge,
+                    block(1, l) * ridge,
+                    block(2, l + 1) * ridge,
+                    drive_columns,
+                ],
                 0,
             );
-            let keep = self.linear.tr().to_kind(Kind::Double);
-            let rhs = x.tr().matmul(&target.to_kind(Kind::Double)) + &keep * penalty.unsqueeze(1);
-            let w = Tensor::linalg_solve(&(gram + penalty.diag(0)), &rhs, true);
+            // `W x = W_ball Z^ball + W_stay Z^stay + W_prev Z_{t−1}` is `v_a a + v_b b + v_c c`
+            // with v_a = W_ball, v_b = W_ball + W_stay, v_c = v_b + W_prev.
+            let w = double(&self.linear.tr());
+            let (w_ball, w_stay, rest) = (
+                w.narrow(0, 0, l),
+                w.narrow(0, l, l),
+                w.narrow(0, 2 * l, w.size()[0] - 2 * l),
+            );
+            let v_b = &w_ball + &w_stay;
+            let v_c = &v_b + rest.narrow(0, 0, l);
+            let keep = Tensor::cat(
+                &[
+                    w_ball.shallow_clone(),
+                    v_b,
+                    v_c,
+                    rest.narrow(0, l, rest.size()[0] - l),
+                ],
+                0,
+            );
+            let rhs = x.tr().matmul(&double(target)) + &keep * penalty.unsqueeze(1);
+            let v = Tensor::linalg_solve(&(gram + penalty.diag(0)), &rhs, true);
+            let (v_a, v_b, v_c) = (v.narrow(0, 0, l), v.narrow(0, l, l), v.narrow(0, 2 * l, l));
+            let w = Tensor::cat(
+                &[
+                    v_a.shallow_clone(),
+                    &v_b - &v_a,
+                    &v_c - &v_b,
+                    v.narrow(0, 3 * l, v.size()[0] - 3 * l),
+                ],
+                0,
+            );
             self.linear.copy_(&w.tr().to_kind(Kind::Float));
         });
     }
@@ -742,5 +800,50 @@ mod tests {
             vec![vec![2., 1., 0.], vec![5., 5., 5.], vec![5., 5., 5.]]
         );
         assert_eq!(past_drives(&drives, &[3], &[0], 0).size(), [1, 0]);
+    }
+
+    #[test]
+    fn the_linear_fit_shrinks_each_input_by_its_own_spread() {
+        let (space, _) = small_space();
+        let mut encoder =
+            MotionEncoder::new(MotionShape::for_space(&[4, 4], 4), &space, Device::Cpu);
+        let l = space.shape.latent as i64;
+        tch::manual_seed(3);
+        let f = 4000;
+        // The state spreads 5× wider than the motions riding on it, as on the skirt.
+        let state = Tensor::randn([f, l], (Kind::Float, Device::Cpu));
+        let own = Tensor::randn([f, l], (Kind::Float, Device::Cpu)) * 0.2;
+        let body = Tensor::randn([f, l], (Kind::Float, Device::Cpu)) * 0.2;
+        let stay = &state + &body;
+        let inertia = Tensor::cat(&[&stay + &own, stay.shallow_clone()], 1);
+        // The garment keeps its state and goes on at its own velocity.
+        let target = &state + &own;
+        let none = Tensor::zeros([f, 0], (Kind::Float, Device::Cpu));
+        encoder.init_linear(&inertia, &state, &none, &target, 0.1, 1.0);
+        let probe = |ball: &Tensor, stay: &Tensor, previous: &Tensor| {
+            let i = Tensor::cat(&[ball, stay], 1);
+            let z = encoder.linear_latent(
+                &i,
+                previous,
+                &Tensor::zeros([1, 0], (Kind::Float, Device::Cpu)),
+            );
+            let constant = encoder.linear_latent(
+                &Tensor::zeros([1, 2 * l], (Kind::Float, Device::Cpu)),
+                &Tensor::zeros([1, l], (Kind::Float, Device::Cpu)),
+                &Tensor::zeros([1, 0], (Kind::Float, Device::Cpu)),
+            );
+            (z - constant).sum(Kind::Double).double_value(&[]) / l as f64
+        };
+        let unit = Tensor::ones([1, l], (Kind::Float, Device::Cpu));
+        let zero = unit.zeros_like();
+        // Its own velocity, penalised by its own spread: 1 / (1 + 0.1) of it is kept.
+        let velocity = probe(&unit, &zero, &zero);
+        assert!(
+            (velocity - 1.0 / 1.1).abs() < 0.03,
+            "the velocity's coefficient {velocity}"
+        );
+        // A state held still stays where it is (the prior and the fit agree).
+        let held = probe(&unit, &unit, &unit);
+        assert!((held - 1.0).abs() < 0.02, "the state's coefficient {held}");
     }
 }
