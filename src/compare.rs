@@ -249,9 +249,8 @@ pub fn compare(inputs: &Inputs, settings: &Settings) -> Result<Report> {
             .sum::<f64>()
             / n as f64
     };
-    let runs_mean_parts: Vec<Trace> = (0..hem::PARTS.len())
-        .map(|p| hem::mean_trace(&run_parts.iter().map(|r| &r[p]).collect::<Vec<_>>()))
-        .collect();
+    // The parts are linear in the residual: the runs' mean's parts are the mean of theirs.
+    let runs_mean_parts = hem::parts(&runs_mean, &runs_mean_centroid);
     let parts_of_runs: Vec<HemPart> = hem::PARTS
         .iter()
         .enumerate()
@@ -352,12 +351,12 @@ pub fn compare(inputs: &Inputs, settings: &Settings) -> Result<Report> {
                         .collect(),
                 ),
                 amplitude_ratio: hem::amplitude_mm(&own_parts[p]) / runs.amplitude_mm.max(1e-12),
-                behind_the_runs: hem::trace_lag(
-                    &own_parts[p],
-                    &runs_mean_parts[p],
-                    max_lag,
-                    inputs.fps,
-                ),
+                // An axis part is its centroid's coordinate at every vertex: time one series.
+                behind_the_runs: if p < 3 {
+                    hem::axis_lag(&centroid, &runs_mean_centroid, p, max_lag, inputs.fps)
+                } else {
+                    hem::trace_lag(&own_parts[p], &runs_mean_parts[p], max_lag, inputs.fps)
+                },
             })
             .collect();
         let hem_score = HemScore {

@@ -221,8 +221,21 @@ pub fn lag(response: &[[f64; 3]], drive: &[[f64; 3]], max: usize, fps: f32) -> O
     lag_of_channels(&axes(response), &axes(drive), max, fps)
 }
 
-/// [`lag`] of a whole trace behind another, every vertex coordinate a channel: when a part of
-/// the swing ([`parts`]) comes against the runs'.
+/// [`lag`] of one axis of a centroid series behind another's: when an axis part of the swing
+/// ([`parts`]: every vertex carries the centroid's coordinate) comes against the runs'.
+pub fn axis_lag(
+    response: &[[f64; 3]],
+    drive: &[[f64; 3]],
+    axis: usize,
+    max: usize,
+    fps: f32,
+) -> Option<Lag> {
+    let channel = |s: &[[f64; 3]]| vec![s.iter().map(|p| p[axis]).collect::<Vec<f64>>()];
+    lag_of_channels(&channel(response), &channel(drive), max, fps)
+}
+
+/// [`lag`] of a whole trace behind another, every vertex coordinate a channel: when the shape
+/// part of the swing ([`parts`]) comes against the runs'.
 pub fn trace_lag(response: &Trace, drive: &Trace, max: usize, fps: f32) -> Option<Lag> {
     let channels = |t: &Trace| -> Vec<Vec<f64>> {
         let width = t.first().map_or(0, |f| f.len());

@@ -538,27 +538,12 @@ impl MotionEncoder {
             let l = previous.size()[1];
             let double = |t: &Tensor| t.to_kind(Kind::Double);
             let (ball, stay) = (inertia.narrow(1, 0, l), inertia.narrow(1, l, l));
-            let x = double(&Tensor::cat(
-                &[&ball - &stay, &stay - previous, previous.shallow_clone()],
-                1,
-            ));
-            let x = Tensor::cat(
-                &[
-                    x,
-                    double(&previous.ones_like().narrow(1, 0, 1)),
-                    double(drive),
-                ],
-                1,
-            );
+            let motions = Tensor::cat(&[&ball - &stay, &stay - previous], 1);
+            let x = double(&Self::linear_input(&motions, previous, drive));
             let gram = x.tr().matmul(&x);
             let diagonal = gram.diagonal(0, 0, 1);
-            let block = |i: i64, n: i64| {
-                diagonal
-                    .narrow(0, i * l, l)
-                    .mean(Kind::Double)
-                    .expand([n], false)
-            };
-            let state = diagonal.narrow(0, 2 * l, l).mean(Kind::Double);
+            let mean_square = |block: i64| diagonal.narrow(0, block * l, l).mean(Kind::Double);
+            let state = mean_square(2);
             // A joint the clips never turn about an axis gives a zero column: a floor keeps
             // the system solvable (its weight stays at zero).
             let drive_columns = diagonal
@@ -567,45 +552,18 @@ impl MotionEncoder {
                 * drive_ridge;
             let penalty = Tensor::cat(
                 &[
-                    block(0, l) * ridge,
-                    block(1, l) * ridge,
-                    block(2, l + 1) * ridge,
+                    mean_square(0).expand([l], false) * ridge,
+                    mean_square(1).expand([l], false) * ridge,
+                    state.expand([l + 1], false) * ridge,
                     drive_columns,
                 ],
                 0,
             );
-            // `W x = W_ball Z^ball + W_stay Z^stay + W_prev Z_{t−1}` is `v_a a + v_b b + v_c c`
-            // with v_a = W_ball, v_b = W_ball + W_stay, v_c = v_b + W_prev.
-            let w = double(&self.linear.tr());
-            let (w_ball, w_stay, rest) = (
-                w.narrow(0, 0, l),
-                w.narrow(0, l, l),
-                w.narrow(0, 2 * l, w.size()[0] - 2 * l),
-            );
-            let v_b = &w_ball + &w_stay;
-            let v_c = &v_b + rest.narrow(0, 0, l);
-            let keep = Tensor::cat(
-                &[
-                    w_ball.shallow_clone(),
-                    v_b,
-                    v_c,
-                    rest.narrow(0, l, rest.size()[0] - l),
-                ],
-                0,
-            );
+            let keep = to_difference_basis(&double(&self.linear.tr()), l);
             let rhs = x.tr().matmul(&double(target)) + &keep * penalty.unsqueeze(1);
             let v = Tensor::linalg_solve(&(gram + penalty.diag(0)), &rhs, true);
-            let (v_a, v_b, v_c) = (v.narrow(0, 0, l), v.narrow(0, l, l), v.narrow(0, 2 * l, l));
-            let w = Tensor::cat(
-                &[
-                    v_a.shallow_clone(),
-                    &v_b - &v_a,
-                    &v_c - &v_b,
-                    v.narrow(0, 3 * l, v.size()[0] - 3 * l),
-                ],
-                0,
-            );
-            self.linear.copy_(&w.tr().to_kind(Kind::Float));
+            self.linear
+                .copy_(&from_difference_basis(&v, l).tr().to_kind(Kind::Float));
         });
     }
 
@@ -633,6 +591,33 @@ impl MotionEncoder {
     pub fn load_parameters(&mut self, stored: &[(String, Tensor)]) -> anyhow::Result<()> {
         super::space::load_variables(&mut self.vs, stored)
     }
+}
+
+/// `W x = W_ball Z^ball + W_stay Z^stay + W_prev Z_{t−1} + …` written as `v_a a + v_b b + v_c c + …`
+/// over `a = Z^ball − Z^stay`, `b = Z^stay − Z_{t−1}`, `c = Z_{t−1}`: `v_a = W_ball`,
+/// `v_b = W_ball + W_stay`, `v_c = v_b + W_prev`. Rows are inputs (`W` transposed), `l` the latent
+/// size; the rows after the three blocks (constant, drive) pass through.
+fn to_difference_basis(w: &Tensor, l: i64) -> Tensor {
+    let rows = w.size()[0];
+    let v_a = w.narrow(0, 0, l);
+    let v_b = &v_a + w.narrow(0, l, l);
+    let v_c = &v_b + w.narrow(0, 2 * l, l);
+    Tensor::cat(&[v_a, v_b, v_c, w.narrow(0, 3 * l, rows - 3 * l)], 0)
+}
+
+/// The inverse of [`to_difference_basis`].
+fn from_difference_basis(v: &Tensor, l: i64) -> Tensor {
+    let rows = v.size()[0];
+    let (v_a, v_b, v_c) = (v.narrow(0, 0, l), v.narrow(0, l, l), v.narrow(0, 2 * l, l));
+    Tensor::cat(
+        &[
+            v_a.shallow_clone(),
+            &v_b - &v_a,
+            &v_c - &v_b,
+            v.narrow(0, 3 * l, rows - 3 * l),
+        ],
+        0,
+    )
 }
 
 #[cfg(test)]
@@ -845,5 +830,18 @@ mod tests {
         // A state held still stays where it is (the prior and the fit agree).
         let held = probe(&unit, &unit, &unit);
         assert!((held - 1.0).abs() < 0.02, "the state's coefficient {held}");
+    }
+
+    #[test]
+    fn the_difference_basis_maps_back_to_the_same_weights() {
+        tch::manual_seed(3);
+        let (l, extra) = (4, 3);
+        let w = Tensor::randn([3 * l + extra, 5], (Kind::Double, Device::Cpu));
+        let v = to_difference_basis(&w, l);
+        // v_c is the sum of the three latent blocks' weights: what a constant latent sees.
+        let sum = w.narrow(0, 0, l) + w.narrow(0, l, l) + w.narrow(0, 2 * l, l);
+        assert!(f64::try_from((v.narrow(0, 2 * l, l) - sum).abs().max()).unwrap() < 1e-12);
+        let back = from_difference_basis(&v, l);
+        assert!(f64::try_from((back - &w).abs().max()).unwrap() < 1e-12);
     }
 }
