@@ -9,7 +9,6 @@
 //! along `n`, the skinning's own error included. Between two keys the weights move linearly, so
 //! the played normal is the blend of two fitted ones, not an extrapolation.
 
-use super::compress::offset_matrix;
 use crate::geometry::normals::vertex_normals;
 use nalgebra::{DMatrix, Matrix4, Vector3};
 use rayon::prelude::*;
@@ -75,6 +74,10 @@ pub fn fit(
     // The corner angles' triangles as index lanes, once for every sample.
     let corners = Corners::new(triangles, base.len());
     let mut y = vec![0.0f64; CHUNK.min(samples.len()) * n3];
+    // The targets as one `[K, 3N]` matrix, once: each chunk's offsets are one product with it.
+    let shapes: Vec<f32> = targets.iter().flatten().flatten().copied().collect();
+    let shapes = Tensor::from_slice(&shapes).view([k as i64, n3 as i64]);
+    let mut offsets = vec![0.0f32; CHUNK.min(samples.len()) * n3];
     for chunk in samples.chunks(CHUNK) {
         let x: Vec<f32> = chunk
             .iter()
@@ -83,19 +86,23 @@ pub fn fit(
         let x = Tensor::from_slice(&x)
             .view([chunk.len() as i64, k as i64 + 1])
             .to_kind(Kind::Double);
-        let owned: Vec<Vec<f32>> = chunk.iter().map(|w| w.1.to_vec()).collect();
-        let offsets = offset_matrix(targets, &owned);
+        let weights: Vec<f32> = chunk.iter().flat_map(|w| w.1.iter().copied()).collect();
+        let offsets = &mut offsets[..chunk.len() * n3];
+        Tensor::from_slice(&weights)
+            .view([chunk.len() as i64, k as i64])
+            .matmul(&shapes)
+            .copy_data(offsets, chunk.len() * n3);
         // Samples as rows (frames × 3N, f64), so XᵀY is one matrix product.
         let rows = &mut y[..chunk.len() * n3];
         rows.par_chunks_mut(n3).enumerate().for_each_init(
             || Scratch::new(base.len()),
             |scratch, (f, row)| {
-                let column = offsets.column(f);
+                let column = &offsets[f * n3..(f + 1) * n3];
                 for ((p, b), d) in scratch
                     .points
                     .iter_mut()
                     .zip(base)
-                    .zip(column.as_slice().chunks_exact(3))
+                    .zip(column.chunks_exact(3))
                 {
                     *p = [b[0] + d[0], b[1] + d[1], b[2] + d[2]];
                 }
@@ -110,7 +117,18 @@ pub fn fit(
                 }
             },
         );
-        let y = Tensor::from_slice(rows).view([chunk.len() as i64, n3 as i64]);
+        // SAFETY: `rows` is a live f64 buffer of exactly chunk × 3N values, row-major as the
+        // strides say; the tensor viewing it is only read by the product below and dropped at
+        // the end of this iteration, before `rows` is written again.
+        let y = unsafe {
+            Tensor::from_blob(
+                rows.as_ptr().cast::<u8>(),
+                &[chunk.len() as i64, n3 as i64],
+                &[n3 as i64, 1],
+                Kind::Double,
+                tch::Device::Cpu,
+            )
+        };
         gram += x.tr().matmul(&x);
         xty += x.tr().matmul(&y);
     }
