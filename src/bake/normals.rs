@@ -79,19 +79,12 @@ pub fn fit(
     let shapes = Tensor::from_slice(&shapes).view([k as i64, n3 as i64]);
     let mut offsets = vec![0.0f32; CHUNK.min(samples.len()) * n3];
     for chunk in samples.chunks(CHUNK) {
-        let x: Vec<f32> = chunk
-            .iter()
-            .flat_map(|w| (0..=k).map(|c| w.1.get(c).copied().unwrap_or(1.0)))
-            .collect();
-        let x = Tensor::from_slice(&x)
-            .view([chunk.len() as i64, k as i64 + 1])
-            .to_kind(Kind::Double);
         let weights: Vec<f32> = chunk.iter().flat_map(|w| w.1.iter().copied()).collect();
+        let weights = Tensor::from_slice(&weights).view([chunk.len() as i64, k as i64]);
         let offsets = &mut offsets[..chunk.len() * n3];
-        Tensor::from_slice(&weights)
-            .view([chunk.len() as i64, k as i64])
-            .matmul(&shapes)
-            .copy_data(offsets, chunk.len() * n3);
+        weights.matmul(&shapes).copy_data(offsets, chunk.len() * n3);
+        let x =
+            Tensor::cat(&[&weights, &weights.ones_like().narrow(1, 0, 1)], 1).to_kind(Kind::Double);
         // Samples as rows (frames × 3N, f64), so XᵀY is one matrix product.
         let rows = &mut y[..chunk.len() * n3];
         rows.par_chunks_mut(n3).enumerate().for_each_init(

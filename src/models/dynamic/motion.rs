@@ -593,10 +593,11 @@ impl MotionEncoder {
     }
 }
 
-/// `W x = W_ball Z^ball + W_stay Z^stay + W_prev Z_{t−1} + …` written as `v_a a + v_b b + v_c c + …`
-/// over `a = Z^ball − Z^stay`, `b = Z^stay − Z_{t−1}`, `c = Z_{t−1}`: `v_a = W_ball`,
-/// `v_b = W_ball + W_stay`, `v_c = v_b + W_prev`. Rows are inputs (`W` transposed), `l` the latent
-/// size; the rows after the three blocks (constant, drive) pass through.
+/// `W x = W_ball Z^ball + W_stay Z^stay + W_prev Z_{t−1} + …` written as
+/// `v_a a + v_b b + v_c c + …` over `a = Z^ball − Z^stay`, `b = Z^stay − Z_{t−1}`, `c = Z_{t−1}`:
+/// `v_a = W_ball`, `v_b = W_ball + W_stay`, `v_c = v_b + W_prev`. Rows are inputs (`W`
+/// transposed), `l` the latent size; the rows after the three blocks (constant, drive) pass
+/// through.
 fn to_difference_basis(w: &Tensor, l: i64) -> Tensor {
     let rows = w.size()[0];
     let v_a = w.narrow(0, 0, l);
